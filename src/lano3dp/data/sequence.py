@@ -1,0 +1,97 @@
+"""Windowed samples for diffusion-policy training, as Diffusion Policy's SequenceSampler.
+
+A sample is a window of `horizon` steps. Windows may start up to n_obs_steps - 1 steps
+before an episode and end up to n_action_steps - 1 steps after it; the missing steps
+repeat the episode's first or last frame (edge padding), so every state of an episode,
+including the first, is a training observation.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from lano3dp.data.store import EpisodeStore
+
+
+def split_episodes(n_episodes: int, val_ratio: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Split episode indices into (train, val). At least one episode each when val_ratio > 0 and n >= 2."""
+    if not 0.0 <= val_ratio < 1.0:
+        raise ValueError(f"val_ratio must be in [0, 1), got {val_ratio}")
+    order = np.random.default_rng(seed).permutation(n_episodes)
+    n_val = int(round(n_episodes * val_ratio))
+    if val_ratio > 0 and n_episodes >= 2:
+        n_val = min(max(n_val, 1), n_episodes - 1)
+    return np.sort(order[n_val:]), np.sort(order[:n_val])
+
+
+def window_indices(episode_ends: np.ndarray, episodes: Sequence[int], horizon: int, pad_before: int,
+                   pad_after: int) -> np.ndarray:
+    """(M, 4) int64 rows of (buffer_start, buffer_end, sample_start, sample_end) for every window."""
+    rows = []
+    for episode in episodes:
+        start = 0 if episode == 0 else int(episode_ends[episode - 1])
+        end = int(episode_ends[episode])
+        length = end - start
+        for offset in range(-pad_before, length - horizon + pad_after + 1):
+            buffer_start = max(offset, 0) + start
+            buffer_end = min(offset + horizon, length) + start
+            sample_start = buffer_start - (offset + start)
+            rows.append((buffer_start, buffer_end, sample_start, sample_start + buffer_end - buffer_start))
+    return np.asarray(rows, dtype=np.int64).reshape(-1, 4)
+
+
+class SequenceDataset:
+    """Map-style dataset of training windows from an EpisodeStore, held in memory.
+
+    Each item is {"obs": {key: (n_obs_steps, ...)}, "action": (horizon, action_dim)}, numpy
+    arrays (a torch DataLoader's default collate makes them tensors).
+    """
+
+    def __init__(self, store: EpisodeStore | str, obs_keys: Sequence[str], action_key: str = "action",
+                 n_obs_steps: int = 2, horizon: int = 16, n_action_steps: int = 8,
+                 episodes: Sequence[int] | None = None):
+        if not 1 <= n_obs_steps <= horizon or not 1 <= n_action_steps <= horizon:
+            raise ValueError(f"need 1 <= n_obs_steps, n_action_steps <= horizon; got {n_obs_steps}, "
+                             f"{n_action_steps}, {horizon}")
+        store = store if isinstance(store, EpisodeStore) else EpisodeStore.open(store)
+        if store.n_episodes == 0:
+            raise ValueError(f"{store.path} has no episodes")
+        self.store = store
+        self.obs_keys = list(obs_keys)
+        self.action_key = action_key
+        self.n_obs_steps, self.horizon, self.n_action_steps = n_obs_steps, horizon, n_action_steps
+        self.episodes = np.arange(store.n_episodes) if episodes is None else np.asarray(episodes, dtype=np.int64)
+        self.data = store.load([*self.obs_keys, action_key])
+        self.indices = window_indices(store.episode_ends, self.episodes, horizon,
+                                      pad_before=n_obs_steps - 1, pad_after=n_action_steps - 1)
+
+    def __len__(self) -> int:
+        return len(self.indices)
+
+    def _window(self, key: str, row: np.ndarray, length: int) -> np.ndarray:
+        buffer_start, buffer_end, sample_start, sample_end = row
+        values = self.data[key][buffer_start:buffer_end]
+        if sample_start == 0 and sample_end == self.horizon:
+            return values[:length]
+        # Edge padding: repeat the first frame before the episode, the last after it.
+        take = np.clip(np.arange(length) - sample_start, 0, len(values) - 1)
+        return values[take]
+
+    def __getitem__(self, index: int) -> dict:
+        row = self.indices[index]
+        obs = {key: self._window(key, row, self.n_obs_steps) for key in self.obs_keys}
+        return {"obs": obs, "action": self._window(self.action_key, row, self.horizon)}
+
+    def all_actions(self) -> np.ndarray:
+        """Every action row of the selected episodes, for fitting the normaliser."""
+        return self._rows(self.action_key)
+
+    def all_obs(self, key: str) -> np.ndarray:
+        return self._rows(key)
+
+    def _rows(self, key: str) -> np.ndarray:
+        ends = self.store.episode_ends
+        parts = [self.data[key][(0 if e == 0 else ends[e - 1]):ends[e]] for e in self.episodes]
+        return np.concatenate(parts, axis=0)

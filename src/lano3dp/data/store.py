@@ -1,0 +1,209 @@
+"""Episode store in zarr, in Diffusion Policy's layout.
+
+    <root>/data/<key>          episodes concatenated on axis 0
+    <root>/meta/episode_ends   int64, exclusive end index of each episode
+    <root> attributes          skill, object_names, camera, control_hz, versions, ...
+
+Appending is crash-safe: zarr's local store writes every chunk atomically (temp file +
+rename), and `meta/episode_ends` is written last, so it is the commit point. Rows past
+the last episode end (an append cut short) are invisible to readers and are truncated
+by the next append.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+
+import numpy as np
+import zarr
+
+from lano3dp.errors import CorruptFileError, Lano3dpError
+
+FORMAT_NAME = "lano3dp-episodes"
+FORMAT_VERSION = 1
+# Aim for chunks of about this many bytes along the time axis: large enough for fast
+# reads, small enough that an append rewrites little.
+_TARGET_CHUNK_BYTES = 2 << 20
+
+
+class DatasetSchemaError(Lano3dpError, ValueError):
+    """An episode does not match the store's keys, shapes or dtypes."""
+
+
+def library_versions() -> dict[str, str]:
+    import importlib.metadata as md
+
+    versions = {"python": platform.python_version()}
+    for package in ("lano3dp", "numpy", "zarr", "mujoco", "torch"):
+        try:
+            versions[package] = md.version(package)
+        except md.PackageNotFoundError:
+            pass
+    return versions
+
+
+def _to_jsonable(value):
+    return json.loads(json.dumps(value, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+
+
+class EpisodeStore:
+    """A zarr store of episodes. Open with `create`, `open` or `open_or_create`."""
+
+    def __init__(self, root: zarr.Group, path: Path):
+        self._root = root
+        self.path = path
+        self._episode_ends = np.asarray(root["meta/episode_ends"][:], dtype=np.int64)
+
+    # ---- construction -------------------------------------------------------------------
+    @classmethod
+    def create(cls, path, attrs: Mapping | None = None, overwrite: bool = False) -> EpisodeStore:
+        path = Path(path)
+        if path.exists() and not overwrite:
+            raise FileExistsError(f"{path} already exists; open it, or pass overwrite=True")
+        root = zarr.open_group(str(path), mode="w")
+        root.create_group("data")
+        meta = root.create_group("meta")
+        meta.create_array("episode_ends", shape=(0,), chunks=(4096,), dtype="int64")
+        root.attrs.update(
+            _to_jsonable(
+                {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "versions": library_versions()}
+                | dict(attrs or {})
+            )
+        )
+        return cls(root, path)
+
+    @classmethod
+    def open(cls, path, mode: str = "r") -> EpisodeStore:
+        """Open an existing store; mode "r" (read-only) or "r+" (append)."""
+        path = Path(path)
+        if not path.exists():
+            raise FileNotFoundError(f"dataset {path} does not exist")
+        try:
+            root = zarr.open_group(str(path), mode=mode)
+            if root.attrs.get("format") != FORMAT_NAME:
+                raise CorruptFileError(path, f"not a {FORMAT_NAME} store (format={root.attrs.get('format')!r})")
+            store = cls(root, path)
+            store._validate()
+        except CorruptFileError:
+            raise
+        except Exception as error:  # zarr raises many types for damaged metadata or chunks
+            raise CorruptFileError(path, f"unreadable dataset ({type(error).__name__}: {error})") from error
+        return store
+
+    @classmethod
+    def open_or_create(cls, path, attrs: Mapping | None = None) -> EpisodeStore:
+        """Open for appending if `path` exists (checking `attrs` agree on skill and objects), else create."""
+        path = Path(path)
+        if not path.exists():
+            return cls.create(path, attrs)
+        store = cls.open(path, mode="r+")
+        for key in ("skill", "object_names"):
+            if attrs and key in attrs and key in store.attrs and store.attrs[key] != _to_jsonable(attrs[key]):
+                raise DatasetSchemaError(
+                    f"{path} holds {key}={store.attrs[key]!r}, but {_to_jsonable(attrs[key])!r} was asked for"
+                )
+        return store
+
+    def _validate(self) -> None:
+        ends = self._episode_ends
+        if len(ends) and (np.any(np.diff(ends) <= 0) or ends[0] <= 0):
+            raise CorruptFileError(self.path, "meta/episode_ends is not strictly increasing")
+        for key in self.keys:
+            if self._root["data"][key].shape[0] < self.n_steps:
+                raise CorruptFileError(
+                    self.path, f"data/{key} has {self._root['data'][key].shape[0]} rows, episodes need {self.n_steps}"
+                )
+
+    # ---- properties ---------------------------------------------------------------------
+    @property
+    def attrs(self) -> dict:
+        return dict(self._root.attrs)
+
+    def update_attrs(self, **attrs) -> None:
+        self._root.attrs.update(_to_jsonable(attrs))
+
+    @property
+    def keys(self) -> list[str]:
+        return sorted(name for name, _ in self._root["data"].arrays())
+
+    @property
+    def episode_ends(self) -> np.ndarray:
+        return self._episode_ends.copy()
+
+    @property
+    def n_episodes(self) -> int:
+        return len(self._episode_ends)
+
+    @property
+    def n_steps(self) -> int:
+        return int(self._episode_ends[-1]) if len(self._episode_ends) else 0
+
+    def episode_lengths(self) -> np.ndarray:
+        return np.diff(np.concatenate([[0], self._episode_ends]))
+
+    # ---- writing ------------------------------------------------------------------------
+    def append_episode(self, episode: Mapping[str, np.ndarray]) -> int:
+        """Append one episode; every array has the same length T >= 1 on axis 0. Returns its index."""
+        if not episode:
+            raise DatasetSchemaError("an episode needs at least one array")
+        lengths = {key: len(value) for key, value in episode.items()}
+        length = next(iter(lengths.values()))
+        if length == 0 or any(n != length for n in lengths.values()):
+            raise DatasetSchemaError(f"episode arrays must share a non-zero length on axis 0, got {lengths}")
+        data = self._root["data"]
+        existing = set(self.keys)
+        if existing and existing != set(episode):
+            raise DatasetSchemaError(
+                f"episode keys {sorted(episode)} differ from the store's {sorted(existing)}"
+            )
+        start = self.n_steps
+        for key, value in episode.items():
+            value = np.asarray(value)
+            if key not in existing:
+                row_bytes = max(1, value[0].nbytes)
+                chunk_rows = int(np.clip(_TARGET_CHUNK_BYTES // row_bytes, 1, 4096))
+                data.create_array(key, shape=(0, *value.shape[1:]), chunks=(chunk_rows, *value.shape[1:]),
+                                  dtype=value.dtype)
+            array = data[key]
+            if array.shape[1:] != value.shape[1:]:
+                raise DatasetSchemaError(f"'{key}' has per-step shape {value.shape[1:]}, store has {array.shape[1:]}")
+            if not np.can_cast(value.dtype, array.dtype, casting="same_kind"):
+                raise DatasetSchemaError(f"'{key}' has dtype {value.dtype}, store has {array.dtype}")
+            # Drops rows left by an append that was cut short, then writes after the last episode.
+            array.resize((start + length, *array.shape[1:]))
+            array[start:] = value
+        ends = self._root["meta/episode_ends"]
+        ends.resize((self.n_episodes + 1,))
+        ends[self.n_episodes] = start + length  # the commit point
+        self._episode_ends = np.append(self._episode_ends, start + length)
+        return self.n_episodes - 1
+
+    # ---- reading ------------------------------------------------------------------------
+    def episode_slice(self, index: int) -> slice:
+        if not -self.n_episodes <= index < self.n_episodes:
+            raise IndexError(f"episode {index} out of range: {self.path} has {self.n_episodes} episodes")
+        index %= self.n_episodes
+        start = 0 if index == 0 else int(self._episode_ends[index - 1])
+        return slice(start, int(self._episode_ends[index]))
+
+    def get_episode(self, index: int, keys: Iterable[str] | None = None) -> dict[str, np.ndarray]:
+        window = self.episode_slice(index)
+        return {key: self._read(key, window) for key in (keys or self.keys)}
+
+    def load(self, keys: Iterable[str] | None = None) -> dict[str, np.ndarray]:
+        """Every committed step of `keys` (default all) as in-memory arrays."""
+        return {key: self._read(key, slice(0, self.n_steps)) for key in (keys or self.keys)}
+
+    def _read(self, key: str, window: slice) -> np.ndarray:
+        if key not in self._root["data"]:
+            raise KeyError(f"{self.path} has no data/{key}; it has {self.keys}")
+        try:
+            return np.asarray(self._root["data"][key][window])
+        except Exception as error:
+            raise CorruptFileError(self.path, f"data/{key} is unreadable ({type(error).__name__}: {error})") from error
+
+    def __repr__(self) -> str:
+        return f"EpisodeStore({str(self.path)!r}, episodes={self.n_episodes}, steps={self.n_steps}, keys={self.keys})"

@@ -1,0 +1,34 @@
+"""Perception: named objects -> masks -> per-object world clouds.
+
+Light imports only; the transformers backends (`open_vocab`, `tracker`) and the RealSense
+source are imported from their modules on demand.
+"""
+
+from lano3dp.perception.base import MaskResult, Segmenter
+from lano3dp.perception.exceptions import (
+    AmbiguousObjectError,
+    MissingWeightsError,
+    ObjectNotFoundError,
+    PerceptionError,
+    TooFewPointsError,
+)
+from lano3dp.perception.observer import ObjectClouds, ObjectObserver, scene_cloud
+from lano3dp.perception.perturb import MaskPerturbation, PerturbedSegmenter
+from lano3dp.perception.sim_oracle import SimOracleSegmenter, resolve_phrase
+
+__all__ = [
+    "AmbiguousObjectError",
+    "MaskPerturbation",
+    "MaskResult",
+    "MissingWeightsError",
+    "ObjectClouds",
+    "ObjectNotFoundError",
+    "ObjectObserver",
+    "PerceptionError",
+    "PerturbedSegmenter",
+    "Segmenter",
+    "SimOracleSegmenter",
+    "TooFewPointsError",
+    "resolve_phrase",
+    "scene_cloud",
+]

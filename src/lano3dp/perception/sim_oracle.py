@@ -1,0 +1,161 @@
+"""Ground-truth segmenter for simulated frames: phrases resolved against the scene's objects.
+
+A phrase such as "bowl", "red bowl", "the small red bowl" or an exact object name
+("bowl_2") is resolved by its kind noun plus attribute words (colour, size) against
+`frame.instance_names` and `frame.instance_attributes`; the mask comes from
+`frame.segmentation`. Resolution is by meaning, not by what is visible, so an occluded
+object is reported as not found rather than silently replaced by a look-alike.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from lano3dp.geometry.frame import RGBDFrame
+from lano3dp.perception.base import MaskResult
+from lano3dp.perception.exceptions import AmbiguousObjectError
+
+COLOURS = frozenset(
+    "red green blue yellow orange purple pink brown black white grey gray cyan magenta "
+    "beige silver gold golden teal violet navy".split()
+)
+# Size words to one canonical word each, so "big bowl" finds an object whose size is "large".
+SIZE_WORDS = {
+    "small": "small", "little": "small", "tiny": "small", "mini": "small",
+    "large": "large", "big": "large", "huge": "large", "giant": "large",
+    "medium": "medium", "mid": "medium", "middle": "medium",
+    "tall": "tall", "short": "short",
+}  # fmt: skip
+_COLOUR_ALIASES = {"gray": "grey", "golden": "gold"}
+_STOPWORDS = frozenset("the a an this that these those some my our your its of one".split())
+_TOKEN = re.compile(r"[a-z0-9]+")
+
+
+def singular(word: str) -> str:
+    """Crude English singular for object nouns ("bowls" -> "bowl", "boxes" -> "box", "glasses" -> "glass")."""
+    if len(word) > 4 and word.endswith(("sses", "xes", "ches", "shes")):
+        return word[:-2]
+    if len(word) > 3 and word.endswith("s") and not word.endswith(("ss", "us", "is")):
+        return word[:-1]
+    return word
+
+
+def canonical_attribute(word: str) -> str:
+    word = word.lower()
+    return SIZE_WORDS.get(word, _COLOUR_ALIASES.get(word, word))
+
+
+def tokens(text: str) -> list[str]:
+    """Lower-case word tokens; underscores and hyphens split words; articles are dropped."""
+    return [t for t in _TOKEN.findall(text.lower().replace("_", " ")) if t not in _STOPWORDS]
+
+
+@dataclass(frozen=True)
+class SceneObject:
+    """What the oracle knows of one object: its name, kind noun (as tokens) and attribute words."""
+
+    name: str
+    kind: tuple[str, ...]
+    attributes: frozenset[str] = field(default_factory=frozenset)
+
+    @classmethod
+    def from_frame_entry(cls, name: str, attributes: Mapping[str, str] | None) -> SceneObject:
+        attributes = dict(attributes or {})
+        name_tokens = [t for t in tokens(name) if not t.isdigit()]
+        kind_text = attributes.get("kind") or (name_tokens[-1] if name_tokens else name)
+        kind = tuple(singular(t) for t in tokens(str(kind_text)))
+        words = {canonical_attribute(str(v)) for k, v in attributes.items() if k != "kind" and v}
+        # Names like "red_bowl" carry their attributes when the simulator gives none.
+        words |= {canonical_attribute(t) for t in name_tokens if t in COLOURS or t in SIZE_WORDS}
+        return cls(name, kind, frozenset(words))
+
+
+def _contains(sequence: Sequence[str], sub: Sequence[str]) -> int:
+    """Index of the first occurrence of `sub` in `sequence`, or -1."""
+    n = len(sub)
+    for i in range(len(sequence) - n + 1):
+        if tuple(sequence[i : i + n]) == tuple(sub):
+            return i
+    return -1
+
+
+def resolve_phrase(phrase: str, objects: Sequence[SceneObject]) -> list[str]:
+    """Names of the objects a phrase can mean (empty if none, several if ambiguous).
+
+    An exact object name wins outright. Otherwise an object matches when its kind noun
+    appears in the phrase (the longest matching kind wins, so "watering can" beats "can")
+    and every colour or size word left in the phrase is one of the object's attributes.
+    Other words ("ceramic", "over there") are ignored.
+    """
+    phrase_tokens = tokens(phrase)
+    joined = " ".join(phrase_tokens)
+    for obj in objects:
+        if joined and joined == " ".join(tokens(obj.name)):
+            return [obj.name]
+    words = [singular(t) for t in phrase_tokens]
+    scene_attributes = set().union(*(o.attributes for o in objects)) if objects else set()
+    best_len, matches = 0, []
+    for obj in objects:
+        start = _contains(words, obj.kind) if obj.kind else -1
+        if start < 0:
+            continue
+        rest = [canonical_attribute(w) for i, w in enumerate(phrase_tokens) if not start <= i < start + len(obj.kind)]
+        descriptive = [w for w in rest if w in COLOURS or w in SIZE_WORDS.values() or w in scene_attributes]
+        if any(w not in obj.attributes for w in descriptive):
+            continue
+        if len(obj.kind) > best_len:
+            best_len, matches = len(obj.kind), [obj.name]
+        elif len(obj.kind) == best_len:
+            matches.append(obj.name)
+    return matches
+
+
+class SimOracleSegmenter:
+    """Segmenter reading the simulator's ground-truth instance map.
+
+    Args:
+        ambiguity: what to do when a phrase matches several objects.
+            "error" (default) raises AmbiguousObjectError listing them, because silently
+            conditioning a policy on the wrong object is worse than stopping.
+            "largest" picks the candidate with the most visible pixels (ties: first by name),
+            a deterministic choice for scripted data collection in cluttered scenes.
+    """
+
+    def __init__(self, ambiguity: Literal["error", "largest"] = "error"):
+        if ambiguity not in ("error", "largest"):
+            raise ValueError(f"ambiguity must be 'error' or 'largest', got {ambiguity!r}")
+        self.ambiguity = ambiguity
+
+    def segment(self, frame: RGBDFrame, phrases: Sequence[str]) -> list[MaskResult]:
+        if frame.segmentation is None:
+            raise ValueError("SimOracleSegmenter needs frame.segmentation (simulator ground truth); got none")
+        objects = [
+            SceneObject.from_frame_entry(name, frame.instance_attributes.get(name))
+            for name in sorted(frame.instance_names)
+        ]
+        masks = {
+            name: np.isin(frame.segmentation, np.asarray(ids, dtype=np.int64))
+            for name, ids in frame.instance_names.items()
+        }
+        visible = tuple(name for name in sorted(masks) if masks[name].any())
+        results = []
+        for phrase in phrases:
+            candidates = resolve_phrase(phrase, objects)
+            if not candidates:
+                results.append(MaskResult.missing(phrase, visible))
+                continue
+            if len(candidates) > 1:
+                if self.ambiguity == "error":
+                    raise AmbiguousObjectError(phrase, candidates)
+                candidates = sorted(candidates, key=lambda n: (-int(masks[n].sum()), n))
+            name = candidates[0]
+            if not masks[name].any():
+                results.append(MaskResult.missing(phrase, visible, matched_name=name))
+            else:
+                results.append(MaskResult(phrase, masks[name], 1.0, True, name))
+        return results

@@ -106,6 +106,11 @@ def test_names_carry_attributes_when_the_simulator_gives_none():
     assert resolve_phrase("grey bowl", objects) == []
 
 
+def test_role_is_not_a_descriptive_word():
+    bowl = SceneObject.from_frame_entry("bowl", {"kind": "bowl", "color": "red", "size": "medium", "role": "target"})
+    assert bowl.attributes == {"red", "medium"}
+
+
 def test_longest_kind_wins_for_multiword_nouns():
     objects = [
         SceneObject.from_frame_entry("watering_can", {"kind": "watering can"}),

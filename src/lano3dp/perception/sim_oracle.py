@@ -69,7 +69,8 @@ class SceneObject:
         name_tokens = [t for t in tokens(name) if not t.isdigit()]
         kind_text = attributes.get("kind") or (name_tokens[-1] if name_tokens else name)
         kind = tuple(singular(t) for t in tokens(str(kind_text)))
-        words = {canonical_attribute(str(v)) for k, v in attributes.items() if k != "kind" and v}
+        # "role" (target / distractor / obstacle) is bookkeeping, not something a person says.
+        words = {canonical_attribute(str(v)) for k, v in attributes.items() if k not in ("kind", "role") and v}
         # Names like "red_bowl" carry their attributes when the simulator gives none.
         words |= {canonical_attribute(t) for t in name_tokens if t in COLOURS or t in SIZE_WORDS}
         return cls(name, kind, frozenset(words))

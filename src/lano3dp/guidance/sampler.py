@@ -14,21 +14,33 @@ The switch `mode` picks what D is evaluated on: nothing (no guidance), the noisy
 prior methods the paper contrasts with), or the clean estimate A_0|k (the paper). The
 scheduler clips its own x_0 estimate to [-1, 1] (clip_sample), but the cost sees the
 unclipped A_0|k, so clipping never zeroes the guidance gradient.
+
+Guiding on A_k needs no gradient through the network (D(A_k) depends on A_k directly), so that
+mode costs one extra cost evaluation per step; guiding on A_0|k back-propagates through eps_theta.
+
+DDIM. `last_steps` S is measured in training-scale steps for every scheduler: DDIM-10 over 100
+training steps visits t = 90, 80, ..., 0, so S = 10 guides only its last step and S = 100 guides
+all ten. Each guided step applies one push of rho (the paper's Algorithm 1, per step), so the same
+rho pushes DDIM-10 with S = 100 about as often as DDPM-100 with S = 10. With `per_train_step`,
+rho is multiplied by the stride (training steps per inference step) instead, which keeps the total
+push across a window of S training steps the same as DDPM's; measured in bench/bench_guidance.py.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 import torch
+
+from lano3dp.guidance.exceptions import GuidanceError
 
 NoiseFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 CostFn = Callable[[torch.Tensor], torch.Tensor]
 
 
-class GuidanceMode(str, Enum):
+class GuidanceMode(StrEnum):
     NONE = "none"
     NOISY = "noisy"  # D(A_k): guidance on the noisy sample
     CLEAN = "clean"  # D(A_0|k): the paper's guidance
@@ -42,11 +54,14 @@ class GuidanceConfig:
         mode: what the cost is evaluated on (see GuidanceMode).
         scale: rho, the step along -grad; in normalised action units per unit of cost.
         last_steps: S; guide only while the training-scale step k = t + 1 <= S (100 = every step).
+        per_train_step: multiply rho by the scheduler stride (num_train_timesteps / num_inference_steps),
+            so fewer, longer inference steps push as much in total as DDPM-100 (see the module docstring).
     """
 
     mode: GuidanceMode = GuidanceMode.CLEAN
     scale: float = 1.0
     last_steps: int = 10
+    per_train_step: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "mode", GuidanceMode(self.mode))
@@ -58,16 +73,26 @@ class GuidanceConfig:
     def active(self, timestep: int) -> bool:
         return self.mode is not GuidanceMode.NONE and timestep + 1 <= self.last_steps
 
+    @property
+    def enabled(self) -> bool:
+        """True if this config can change a sample at all."""
+        return self.mode is not GuidanceMode.NONE and self.scale > 0 and self.last_steps > 0
+
 
 @dataclass
 class DenoiseStep:
-    """What `on_step` sees after each step: the input A_k, its clean estimate A_0|k, the output A_{k-1}."""
+    """What `on_step` sees after each step: the input A_k, its clean estimate A_0|k, the output A_{k-1}.
+
+    `gradient` (grad_{A_k} D, normalised units) and `cost` (B,) are set on guided steps only.
+    """
 
     timestep: int
     sample: torch.Tensor
     clean_estimate: torch.Tensor
     next_sample: torch.Tensor
     guided: bool
+    gradient: torch.Tensor | None = None
+    cost: torch.Tensor | None = None
 
 
 def clean_estimate(sample: torch.Tensor, noise: torch.Tensor, alpha_bar: torch.Tensor) -> torch.Tensor:
@@ -111,7 +136,10 @@ def denoise(
     if getattr(scheduler.config, "prediction_type", "epsilon") != "epsilon":
         raise ValueError("guided sampling needs an epsilon-prediction scheduler "
                          f"(got {scheduler.config.prediction_type!r})")
-    scheduler.set_timesteps(num_inference_steps or scheduler.config.num_train_timesteps)
+    num_inference_steps = num_inference_steps or scheduler.config.num_train_timesteps
+    scheduler.set_timesteps(num_inference_steps)
+    stride = scheduler.config.num_train_timesteps / num_inference_steps
+    step_scale = guidance.scale * (stride if guidance.per_train_step else 1.0)
     alphas_cumprod = scheduler.alphas_cumprod.to(dtype)
     sample = initial_noise.to(dtype).clone() if initial_noise is not None else torch.randn(
         shape, generator=generator, dtype=dtype)
@@ -120,27 +148,44 @@ def denoise(
         t = int(timestep)
         t_batch = torch.full((batch,), t, dtype=torch.long)
         alpha_bar = alphas_cumprod[t]
-        guided = guidance.active(t) and guidance.scale > 0
-        if guided:
+        guided = guidance.active(t) and step_scale > 0
+        gradient = cost = None
+        if guided and guidance.mode is GuidanceMode.CLEAN:
+            # Eq. 3: the gradient of D(A_0|k) flows back through eps_theta to A_k.
             with torch.enable_grad():
                 sample_var = sample.detach().requires_grad_(True)
                 noise = noise_fn(sample_var, t_batch)
                 estimate = clean_estimate(sample_var, noise, alpha_bar)
-                cost_input = estimate if guidance.mode is GuidanceMode.CLEAN else sample_var
-                cost = cost_fn(cost_input).sum()
-                if cost.requires_grad:
-                    (gradient,) = torch.autograd.grad(cost, sample_var)
-                else:  # no waypoint inside any safety distance: nothing to push
-                    gradient = torch.zeros_like(sample)
-            noise, estimate = noise.detach(), estimate.detach()
+                cost = cost_fn(estimate)
+                gradient = _cost_gradient(cost, sample_var)
+            noise, estimate, cost = noise.detach(), estimate.detach(), cost.detach()
         else:
             with torch.no_grad():
                 noise = noise_fn(sample, t_batch)
             estimate = clean_estimate(sample, noise, alpha_bar)
+            if guided:  # D(A_k): the cost of the noisy sample itself, no network in the graph
+                with torch.enable_grad():
+                    sample_var = sample.detach().requires_grad_(True)
+                    cost = cost_fn(sample_var)
+                    gradient = _cost_gradient(cost, sample_var)
+                cost = cost.detach()
         next_sample = scheduler.step(noise, t, sample, generator=generator).prev_sample
         if guided:
-            next_sample = next_sample - guidance.scale * gradient
+            next_sample = next_sample - step_scale * gradient  # Algorithm 1, line 7
         if on_step is not None:
-            on_step(DenoiseStep(t, sample, estimate, next_sample, guided))
+            on_step(DenoiseStep(t, sample, estimate, next_sample, guided, gradient, cost))
         sample = next_sample
     return sample
+
+
+def _cost_gradient(cost: torch.Tensor, sample_var: torch.Tensor) -> torch.Tensor:
+    if cost.shape != sample_var.shape[:1]:
+        raise GuidanceError(f"cost_fn must return one cost per sample, shape ({sample_var.shape[0]},); "
+                            f"got {tuple(cost.shape)}")
+    if not cost.requires_grad:  # the cost does not depend on the sample (e.g. a constant): nothing to push
+        return torch.zeros_like(sample_var)
+    (gradient,) = torch.autograd.grad(cost.sum(), sample_var)
+    if not torch.isfinite(gradient).all():
+        raise GuidanceError("the guidance gradient is not finite; check the cost function and the normaliser "
+                            "(a zero-range action dimension makes the metric positions blow up)")
+    return gradient.detach()

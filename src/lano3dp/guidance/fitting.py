@@ -1,0 +1,93 @@
+"""Fit simple obstacle shapes to an obstacle's segmented point cloud (world frame, metres).
+
+A single camera sees only the near side of an obstacle, so the centroid of its points is biased
+toward the camera. The cylinder fit therefore fits a circle to the xy points (algebraic least
+squares, Kasa 1976), which finds the axis from a partial arc, and then grows the radius until it
+covers every point: a conservative shape is the safe one for collision avoidance. The box fit
+takes the yaw of the minimum-area footprint rectangle, so it covers what was seen, never more.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lano3dp.errors import EmptyCloudError
+from lano3dp.guidance.costs import Cylinder, OrientedBox
+
+
+def _finite_points(points, min_points: int) -> np.ndarray:
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[-1] != 3:
+        raise ValueError(f"obstacle points must be (N, 3), got shape {points.shape}")
+    points = points[np.isfinite(points).all(-1)]
+    if len(points) < min_points:
+        raise EmptyCloudError(f"cannot fit an obstacle to {len(points)} finite points; need at least {min_points}")
+    return points
+
+
+def fit_circle_xy(xy: np.ndarray) -> tuple[np.ndarray, float] | None:
+    """Least-squares circle through (N, 2) points; None when the points are (nearly) collinear."""
+    design = np.column_stack([xy, np.ones(len(xy))])
+    target = -(xy**2).sum(-1)
+    solution, _, rank, singular = np.linalg.lstsq(design, target, rcond=None)
+    if rank < 3 or singular[-1] < 1e-9 * singular[0]:
+        return None
+    center = -solution[:2] / 2
+    radius_sq = center @ center - solution[2]
+    return (center, float(np.sqrt(radius_sq))) if radius_sq > 0 else None
+
+
+def fit_cylinder(points, *, min_points: int = 10, held_radius: float = 0.0, margin: float = 0.02,
+                 xy_only: bool = True, coverage: float = 1.0) -> Cylinder:
+    """A vertical cylinder around an obstacle's points.
+
+    Args:
+        points: (N, 3) world frame, m.
+        min_points: fewer finite points raise EmptyCloudError.
+        coverage: fraction of points the radius must cover (1.0 = all; 0.98 drops stray outliers).
+
+    Returns:
+        Cylinder with the axis from a circle fit (or the centroid when the points do not look like an
+        arc), radius covering `coverage` of the points, z range from the points' min to max.
+    """
+    points = _finite_points(points, min_points)
+    xy = points[:, :2]
+    centroid = xy.mean(0)
+    spread = np.linalg.norm(xy - centroid, axis=1).max()
+    center = centroid
+    circle = fit_circle_xy(xy)
+    # A flat face or a blob gives a circle far larger than the cloud or centred far from it; only
+    # trust the fit when it is the size of the cloud.
+    if circle is not None and circle[1] <= 2 * spread + 1e-6 and np.linalg.norm(circle[0] - centroid) <= 2 * spread:
+        center = circle[0]
+    radius = float(np.quantile(np.linalg.norm(xy - center, axis=1), coverage))
+    radius = max(radius, 1e-3)  # a single column of points still has some size
+    return Cylinder(center.tolist(), radius, z_min=float(points[:, 2].min()), z_max=float(points[:, 2].max()),
+                    xy_only=xy_only, held_radius=held_radius, margin=margin)
+
+
+def fit_box(points, *, min_points: int = 10, held_radius: float = 0.0, margin: float = 0.02,
+            xy_only: bool = False, angle_resolution_deg: float = 0.5) -> OrientedBox:
+    """A yaw-only oriented box: the minimum-area footprint rectangle and the points' z range.
+
+    A brute-force search over yaw in [0, 90) degrees (a rectangle repeats every 90); at 0.5 degree
+    resolution that is 180 projections of N points, cheap next to segmentation, and simpler and
+    sturdier than rotating calipers on a hull.
+    """
+    points = _finite_points(points, min_points)
+    xy = points[:, :2]
+    angles = np.deg2rad(np.arange(0.0, 90.0, angle_resolution_deg))
+    cos, sin = np.cos(angles), np.sin(angles)
+    # coordinates of every point in every candidate box frame: (A, N)
+    u = cos[:, None] * xy[None, :, 0] + sin[:, None] * xy[None, :, 1]
+    v = -sin[:, None] * xy[None, :, 0] + cos[:, None] * xy[None, :, 1]
+    areas = (u.max(1) - u.min(1)) * (v.max(1) - v.min(1))
+    best = int(np.argmin(areas))
+    yaw = float(angles[best])
+    u_mid, v_mid = (u[best].max() + u[best].min()) / 2, (v[best].max() + v[best].min()) / 2
+    half = np.array([(u[best].max() - u[best].min()) / 2, (v[best].max() - v[best].min()) / 2,
+                     (points[:, 2].max() - points[:, 2].min()) / 2])
+    half = np.maximum(half, 1e-3)
+    center_xy = np.array([np.cos(yaw) * u_mid - np.sin(yaw) * v_mid, np.sin(yaw) * u_mid + np.cos(yaw) * v_mid])
+    center = [float(center_xy[0]), float(center_xy[1]), float((points[:, 2].max() + points[:, 2].min()) / 2)]
+    return OrientedBox(center, half.tolist(), yaw, xy_only=xy_only, held_radius=held_radius, margin=margin)

@@ -1,0 +1,206 @@
+"""Obstacle costs (Eq. 4) and shape fitting: values and gradients against hand-computed cases."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from lano3dp.errors import EmptyCloudError
+from lano3dp.guidance.costs import (
+    Cylinder,
+    Densified,
+    ObstacleSet,
+    OrientedBox,
+    PointCloudObstacle,
+    PositionCost,
+    Sphere,
+    densify,
+)
+from lano3dp.guidance.fitting import fit_box, fit_cylinder
+
+
+def pts(*xyz):
+    """Waypoints as a (1, T, 3) float64 batch."""
+    return torch.tensor([xyz], dtype=torch.float64)
+
+
+def test_cylinder_is_the_papers_xy_hinge_at_q_star():
+    cylinder = Cylinder((0.1, 0.2), radius=0.05, held_radius=0.02, margin=0.01)
+    assert cylinder.safety_distance == pytest.approx(0.08)  # Q* = obstacle + held + margin
+    # waypoints at xy distance 0.10 (outside Q*), 0.06 (inside Q*, colliding) and 0.075 (inside Q*, clear)
+    positions = pts((0.2, 0.2, 0.3), (0.1, 0.26, 0.0), (0.1, 0.125, 1.0))
+    np.testing.assert_allclose(cylinder.clearance(positions)[0], [0.03, -0.01, 0.005], atol=1e-9)
+    # sum_i relu(Q* - d_i) = 0 + 0.02 + 0.005
+    assert cylinder(positions).item() == pytest.approx(0.025, abs=1e-9)
+
+
+def test_cylinder_gradient_is_zero_beyond_q_star_and_points_toward_the_axis_inside():
+    cylinder = Cylinder((0.0, 0.0), radius=0.05, held_radius=0.02, margin=0.01)
+    positions = pts((0.2, 0.0, 0.0), (0.03, 0.04, 0.1)).requires_grad_(True)
+    cylinder(positions).sum().backward()
+    gradient = positions.grad[0]
+    np.testing.assert_allclose(gradient[0], [0, 0, 0])
+    # d relu(Q* - |xy|)/d xy = -xy/|xy|: descending the cost moves the waypoint radially out; z untouched
+    np.testing.assert_allclose(gradient[1], [-0.6, -0.8, 0.0], atol=1e-9)
+
+
+def test_xy_only_ignores_height_and_a_finite_cylinder_does_not():
+    low, high = pts((0.1, 0.0, 0.0)), pts((0.1, 0.0, 0.5))
+    column = Cylinder((0.0, 0.0), 0.05, z_min=0.0, z_max=0.2, xy_only=True)
+    assert column.clearance(low).item() == pytest.approx(column.clearance(high).item())
+    finite = Cylinder((0.0, 0.0), 0.05, z_min=0.0, z_max=0.2, xy_only=False, held_radius=0.01)
+    assert finite.clearance(pts((0.0, 0.0, 0.5))).item() == pytest.approx(0.3 - 0.01)  # straight above the top
+    assert finite.clearance(pts((0.1, 0.0, 0.1))).item() == pytest.approx(0.05 - 0.01)  # beside it
+    assert finite.clearance(pts((0.08, 0.0, 0.24))).item() == pytest.approx(0.05 - 0.01)  # off the rim: 3-4-5
+    assert finite.clearance(pts((0.0, 0.0, 0.1))).item() == pytest.approx(-0.05 - 0.01)  # on the axis, inside
+
+
+def test_sphere_distance_in_3d_and_as_a_disc_with_xy_only():
+    ball = Sphere((0.0, 0.0, 0.1), 0.05)
+    assert ball.clearance(pts((0.0, 0.0, 0.3))).item() == pytest.approx(0.15)
+    disc = Sphere((0.0, 0.0, 0.1), 0.05, xy_only=True)
+    assert disc.clearance(pts((0.0, 0.0, 0.3))).item() == pytest.approx(-0.05)
+
+
+def test_box_signed_distance_inside_outside_and_at_a_corner():
+    box = OrientedBox((0.0, 0.0, 0.1), (0.1, 0.05, 0.1))
+    assert box.clearance(pts((0.0, 0.0, 0.1))).item() == pytest.approx(-0.05)  # centre: nearest face is y
+    assert box.clearance(pts((0.0, 0.04, 0.1))).item() == pytest.approx(-0.01)
+    assert box.clearance(pts((0.3, 0.0, 0.1))).item() == pytest.approx(0.2)
+    assert box.clearance(pts((0.13, 0.09, 0.1))).item() == pytest.approx(0.05, abs=1e-6)  # corner: hypot(.03, .04)
+    assert box.clearance(pts((0.0, 0.0, 0.5))).item() == pytest.approx(0.3)
+    assert OrientedBox((0, 0, 0.1), (0.1, 0.05, 0.1), xy_only=True).clearance(pts((0.0, 0.0, 0.5))).item() == \
+        pytest.approx(-0.05)
+
+
+def test_box_yaw_rotates_its_footprint():
+    box = OrientedBox((1.0, 0.0, 0.0), (0.2, 0.02, 0.5), yaw=math.pi / 2)  # long axis now along world y
+    assert box.clearance(pts((1.0, 0.15, 0.0))).item() < 0
+    assert box.clearance(pts((1.15, 0.0, 0.0))).item() == pytest.approx(0.13, abs=1e-6)
+    np.testing.assert_allclose(np.sort(box.corners_xy()[:, 1]), [-0.2, -0.2, 0.2, 0.2], atol=1e-9)
+
+
+def test_point_cloud_obstacle_uses_the_nearest_point():
+    cloud = PointCloudObstacle(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 2.0]]), point_radius=0.01,
+                               xy_only=False)
+    assert cloud.clearance(pts((0.7, 0.0, 0.0))).item() == pytest.approx(0.3 - 0.01)
+    assert cloud.clearance(pts((0.0, 0.0, 1.8))).item() == pytest.approx(0.2 - 0.01)
+    flat = PointCloudObstacle(np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]), point_radius=0.0, xy_only=True)
+    assert flat.clearance(pts((0.0, 0.1, 5.0))).item() == pytest.approx(0.1)
+
+
+def test_point_cloud_obstacle_without_points_is_an_error():
+    with pytest.raises(EmptyCloudError, match="0 finite points"):
+        PointCloudObstacle(np.full((5, 3), np.nan))
+
+
+@pytest.mark.parametrize("obstacle", [
+    Cylinder((0.0, 0.0), 0.05, margin=0.03),
+    Cylinder((0.0, 0.0), 0.05, z_min=0.0, z_max=0.3, xy_only=False, margin=0.03),
+    Sphere((0.0, 0.0, 0.1), 0.05, margin=0.03),
+    OrientedBox((0.0, 0.0, 0.1), (0.05, 0.08, 0.1), yaw=0.3, margin=0.03),
+    PointCloudObstacle(np.random.default_rng(0).normal(0, 0.02, (64, 3)) + [0, 0, 0.1], xy_only=False),
+], ids=["cylinder", "finite-cylinder", "sphere", "box", "cloud"])
+def test_a_step_down_the_cost_gradient_raises_the_clearance_of_close_waypoints_only(obstacle):
+    positions = torch.tensor([[[0.03, 0.02, 0.12], [-0.04, 0.03, 0.08], [0.15, -0.12, 0.15]]], dtype=torch.float64)
+    positions.requires_grad_(True)
+    cost = obstacle(positions)
+    assert cost.item() > 0
+    (gradient,) = torch.autograd.grad(cost.sum(), positions)
+    assert torch.isfinite(gradient).all()
+    before = obstacle.clearance(positions.detach())
+    after = obstacle.clearance(positions.detach() - 1e-3 * gradient)
+    close = before < obstacle.margin
+    assert close.sum() == 2  # the first two waypoints; the third is beyond the margin
+    assert (after[close] > before[close]).all()
+    assert torch.equal(after[~close], before[~close])
+    assert isinstance(obstacle, PositionCost)
+
+
+def test_cost_follows_the_positions_dtype_and_batches():
+    cylinder = Cylinder((0.0, 0.0), 0.05)
+    positions = torch.zeros(4, 16, 3, dtype=torch.float32)
+    assert cylinder(positions).shape == (4,) and cylinder(positions).dtype == torch.float32
+    with pytest.raises(ValueError, match=r"\(B, T, 3\)"):
+        cylinder(torch.zeros(16, 3))
+
+
+def test_a_waypoint_on_the_axis_gets_a_finite_gradient():
+    positions = pts((0.0, 0.0, 0.0)).requires_grad_(True)
+    Cylinder((0.0, 0.0), 0.05)(positions).backward()
+    assert torch.isfinite(positions.grad).all()
+
+
+def test_obstacle_set_sums_costs_and_takes_the_smallest_clearance():
+    a, b = Cylinder((0.0, 0.0), 0.05, margin=0.02), Sphere((0.2, 0.0, 0.0), 0.05, margin=0.02)
+    both = a + b
+    assert isinstance(both, ObstacleSet) and len(both) == 2
+    positions = pts((0.06, 0.0, 0.0), (0.14, 0.0, 0.0), (0.5, 0.0, 0.0))
+    assert both(positions).item() == pytest.approx(a(positions).item() + b(positions).item())
+    np.testing.assert_allclose(both.clearance(positions)[0], [0.01, 0.01, 0.25], atol=1e-9)
+
+
+def test_densify_catches_a_segment_that_cuts_through_a_thin_obstacle():
+    positions = pts((0.0, -0.1, 0.0), (0.0, 0.1, 0.0))
+    dense = densify(positions, 4)
+    assert dense.shape == (1, 5, 3)
+    np.testing.assert_allclose(dense[0, :, 1], [-0.1, -0.05, 0.0, 0.05, 0.1])
+    pole = Cylinder((0.0, 0.0), 0.03, margin=0.0)
+    assert pole.clearance(positions).min() > 0  # both waypoints are clear...
+    assert Densified(pole, 4).clearance(positions).min() < 0  # ...the segment between them is not
+    assert Densified(pole, 4)(positions).item() > 0
+
+
+def half_cylinder_cloud(center, radius, height, rng, noise=0.002, n=300):
+    """The points a camera on the -y side sees of a vertical cylinder: the near half of its side."""
+    angle = rng.uniform(-np.pi, 0.0, n)
+    z = rng.uniform(0.0, height, n)
+    cloud = np.column_stack([center[0] + radius * np.cos(angle), center[1] + radius * np.sin(angle), z])
+    return cloud + rng.normal(0, noise, cloud.shape)
+
+
+def test_fit_cylinder_recovers_axis_and_radius_from_the_visible_half():
+    rng = np.random.default_rng(0)
+    cloud = half_cylinder_cloud((0.3, -0.1), 0.04, 0.15, rng)
+    cylinder = fit_cylinder(cloud, held_radius=0.03, margin=0.01, coverage=0.99)
+    np.testing.assert_allclose(cylinder.center.numpy(), [0.3, -0.1], atol=0.004)
+    assert cylinder.radius == pytest.approx(0.04, abs=0.005)
+    assert cylinder.z_min == pytest.approx(0.0, abs=0.01) and cylinder.z_max == pytest.approx(0.15, abs=0.01)
+    assert cylinder.safety_distance == pytest.approx(cylinder.radius + 0.04)
+    # the centroid of a half shell sits 2r/pi toward the camera: why the fit uses a circle
+    assert abs(cloud[:, 1].mean() - (-0.1)) > 0.02
+
+
+def test_fit_cylinder_covers_every_point_by_default():
+    rng = np.random.default_rng(1)
+    cloud = rng.normal(0, 0.03, (200, 3))  # a blob, not an arc
+    cylinder = fit_cylinder(cloud)
+    assert (cylinder.clearance(torch.tensor(cloud[None])) <= 1e-9).all()
+
+
+def test_fit_box_recovers_yaw_extents_and_centre():
+    rng = np.random.default_rng(2)
+    half = np.array([0.08, 0.03, 0.05])
+    faces = []
+    for axis in range(3):
+        for sign in (-1, 1):
+            face = rng.uniform(-1, 1, (200, 3)) * half
+            face[:, axis] = sign * half[axis]
+            faces.append(face)
+    local = np.concatenate(faces)
+    yaw = 0.4
+    rotation = np.array([[np.cos(yaw), -np.sin(yaw), 0], [np.sin(yaw), np.cos(yaw), 0], [0, 0, 1]])
+    cloud = local @ rotation.T + [0.5, 0.1, 0.05]
+    box = fit_box(cloud)
+    assert box.yaw == pytest.approx(yaw, abs=np.deg2rad(1.0))
+    np.testing.assert_allclose(box.half_extents.numpy(), half, atol=0.003)
+    np.testing.assert_allclose(box.center.numpy(), [0.5, 0.1, 0.05], atol=0.003)
+
+
+@pytest.mark.parametrize("fit", [fit_cylinder, fit_box])
+def test_fitting_too_few_points_raises_empty_cloud_error(fit):
+    with pytest.raises(EmptyCloudError, match="3 finite points"):
+        fit(np.zeros((3, 3)))
+    with pytest.raises(EmptyCloudError):
+        fit(np.full((50, 3), np.nan))

@@ -1,0 +1,173 @@
+"""Configuration of the diffusion policy: a validated dataclass that round-trips through JSON.
+
+Defaults follow the paper's CNN diffusion policy (Chi et al.) on object clouds (DP3 encoder), with a
+small UNet that trains on this CPU (docs: /work/shared/notes/cpu-cost.md).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+OBS_TYPES = ("objects", "scene", "image")
+POINT_ENCODERS = ("residual", "mlp")
+INFERENCE_SCHEDULERS = ("ddpm", "ddim")
+
+# UNet widths by name. "small" is the CPU default (5.4 M parameters), "dp" is Chi et al.'s real-robot size.
+DOWN_DIMS_PRESETS: dict[str, tuple[int, ...]] = {
+    "small": (64, 128, 256),
+    "medium": (128, 256, 512),
+    "dp": (256, 512, 1024),
+}
+
+# Observation keys each obs_type reads from the dataset, besides "state".
+VISUAL_KEYS = {"objects": "object_clouds", "scene": "scene_cloud", "image": "rgb"}
+
+
+@dataclass
+class PolicyConfig:
+    """Everything needed to rebuild a DiffusionPolicy (saved as config.json beside its weights).
+
+    Attributes:
+        obs_type: "objects" (Lan-o3dp: one cloud per named object), "scene" (DP3: the cropped scene cloud)
+            or "image" (Diffusion Policy: a 96x96 RGB image).
+        object_names: the object slots, in the order the dataset stores them (obs_type "objects").
+        n_points: points per object cloud the policy was trained on (any N works at inference: max-pool).
+        scene_points: points of the scene cloud (obs_type "scene").
+        image_size: side of the square RGB image (obs_type "image").
+        state_dim: EE position (3) + rotation 6D (6) + gripper opening (1) + grasp flag (1).
+        action_dim: EE position (3) + rotation 6D (6) + gripper command (1).
+        n_obs_steps, horizon, n_action_steps: To, H, Ta of Diffusion Policy; the executed actions are
+            trajectory[To - 1 : To - 1 + Ta].
+        down_dims: UNet channel widths per level; see DOWN_DIMS_PRESETS.
+        diffusion_step_embed_dim, kernel_size, n_groups: UNet step embedding, Conv1d kernel, GroupNorm groups.
+        point_encoder: "residual" (the paper's best: 68.8% vs 64.1%) or "mlp" (DP3's encoder).
+        point_hidden_dims: widths of the shared per-point MLP (DP3: 64, 128, 256).
+        encoder_out: feature size of each cloud (per object slot) and of the image.
+        state_feature_dim: feature size of the state MLP.
+        num_train_timesteps, beta_schedule, prediction_type, clip_sample: the diffusion process.
+        inference_scheduler: "ddpm" or "ddim", used when predict_action_chunk is not told otherwise.
+        num_inference_steps: denoising steps at inference (None: num_train_timesteps).
+    """
+
+    obs_type: str = "objects"
+    object_names: tuple[str, ...] = ()
+    n_points: int = 256
+    scene_points: int = 512
+    image_size: int = 96
+    state_dim: int = 11
+    action_dim: int = 10
+    n_obs_steps: int = 2
+    horizon: int = 16
+    n_action_steps: int = 8
+    down_dims: tuple[int, ...] = DOWN_DIMS_PRESETS["small"]
+    diffusion_step_embed_dim: int = 128
+    kernel_size: int = 5
+    n_groups: int = 8
+    point_encoder: str = "residual"
+    point_hidden_dims: tuple[int, ...] = (64, 128, 256)
+    encoder_out: int = 64
+    state_feature_dim: int = 64
+    num_train_timesteps: int = 100
+    beta_schedule: str = "squaredcos_cap_v2"
+    prediction_type: str = "epsilon"
+    clip_sample: bool = True
+    inference_scheduler: str = "ddim"
+    num_inference_steps: int | None = 10
+    extra: dict[str, Any] = field(default_factory=dict)  # free-form notes (dataset, skill), not used by the model
+
+    def __post_init__(self):
+        self.object_names = tuple(self.object_names)
+        self.down_dims = tuple(int(d) for d in self.down_dims)
+        self.point_hidden_dims = tuple(int(d) for d in self.point_hidden_dims)
+        self.validate()
+
+    def validate(self) -> None:
+        def need(condition: bool, message: str) -> None:
+            if not condition:
+                raise ValueError(f"PolicyConfig: {message}")
+
+        need(self.obs_type in OBS_TYPES, f"obs_type must be one of {OBS_TYPES}, got {self.obs_type!r}")
+        need(self.point_encoder in POINT_ENCODERS,
+             f"point_encoder must be one of {POINT_ENCODERS}, got {self.point_encoder!r}")
+        need(self.inference_scheduler in INFERENCE_SCHEDULERS,
+             f"inference_scheduler must be one of {INFERENCE_SCHEDULERS}, got {self.inference_scheduler!r}")
+        if self.obs_type == "objects":
+            need(len(self.object_names) >= 1, "obs_type 'objects' needs object_names (the slot order)")
+            need(len(set(self.object_names)) == len(self.object_names),
+                 f"object_names must be distinct, got {self.object_names}")
+        for name in ("n_points", "scene_points", "image_size", "state_dim", "action_dim", "n_obs_steps", "horizon",
+                     "n_action_steps", "diffusion_step_embed_dim", "kernel_size", "n_groups", "encoder_out",
+                     "state_feature_dim", "num_train_timesteps"):
+            need(int(getattr(self, name)) >= 1, f"{name} must be >= 1, got {getattr(self, name)}")
+        need(self.kernel_size % 2 == 1, f"kernel_size must be odd (same-length convolution), got {self.kernel_size}")
+        need(len(self.down_dims) >= 1, "down_dims needs at least one level")
+        need(len(self.point_hidden_dims) >= 1, "point_hidden_dims needs at least one layer")
+        need(all(d % self.n_groups == 0 for d in self.down_dims),
+             f"every down_dims entry must be divisible by n_groups={self.n_groups}, got {self.down_dims}")
+        need(self.n_obs_steps - 1 + self.n_action_steps <= self.horizon,
+             f"n_obs_steps - 1 + n_action_steps must be <= horizon, got {self.n_obs_steps} - 1 + "
+             f"{self.n_action_steps} > {self.horizon}")
+        factor = 2 ** (len(self.down_dims) - 1)
+        need(self.horizon % factor == 0,
+             f"horizon {self.horizon} must be divisible by 2^(levels-1) = {factor} for down_dims {self.down_dims} "
+             "(each level but the last halves the time axis); pick another horizon or fewer levels")
+        need(self.prediction_type == "epsilon",
+             "prediction_type must be 'epsilon': the paper found sample prediction makes A_0|k guidance ineffective")
+        if self.num_inference_steps is not None:
+            need(1 <= self.num_inference_steps <= self.num_train_timesteps,
+                 f"num_inference_steps must be in [1, {self.num_train_timesteps}], got {self.num_inference_steps}")
+
+    # ---- derived -----------------------------------------------------------------------
+    @property
+    def visual_key(self) -> str:
+        """The dataset / observation key of the visual input ("object_clouds", "scene_cloud" or "rgb")."""
+        return VISUAL_KEYS[self.obs_type]
+
+    @property
+    def obs_keys(self) -> tuple[str, str]:
+        return (self.visual_key, "state")
+
+    @property
+    def n_slots(self) -> int:
+        """K, the number of object clouds (1 for the scene cloud and image baselines)."""
+        return len(self.object_names) if self.obs_type == "objects" else 1
+
+    # ---- serialisation -----------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        data = dataclasses.asdict(self)
+        for key, value in data.items():
+            if isinstance(value, tuple):
+                data[key] = list(value)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> PolicyConfig:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"PolicyConfig: unknown fields {unknown}")
+        return cls(**data)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2, sort_keys=True)
+
+    @classmethod
+    def from_json(cls, text: str) -> PolicyConfig:
+        return cls.from_dict(json.loads(text))
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(self.to_json() + "\n")
+
+    def replace(self, **changes) -> PolicyConfig:
+        return dataclasses.replace(self, **changes)
+
+
+def down_dims_for(size: str) -> tuple[int, ...]:
+    """UNet widths of a named size ("small", "medium", "dp")."""
+    if size not in DOWN_DIMS_PRESETS:
+        raise ValueError(f"unknown model size {size!r}; choose one of {sorted(DOWN_DIMS_PRESETS)}")
+    return DOWN_DIMS_PRESETS[size]

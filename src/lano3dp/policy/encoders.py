@@ -1,0 +1,208 @@
+"""Observation encoders: object clouds (Lan-o3dp), scene cloud (DP3) and RGB image (Diffusion Policy).
+
+Each maps one observation step to a flat feature; `ObservationEncoder` concatenates the visual
+feature with the state feature, for every observation step the UNet is conditioned on.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import torch
+from torch import nn
+
+from lano3dp.policy.config import PolicyConfig
+
+
+class PointMLPEncoder(nn.Module):
+    """DP3's point encoder: a shared per-point MLP with LayerNorm + ReLU, max-pool, Linear + LayerNorm.
+
+    points (M, N, 3) -> (M, out_dim). No T-Net, no BatchNorm (EMA breaks BatchNorm statistics).
+    """
+
+    def __init__(self, hidden_dims: Sequence[int] = (64, 128, 256), out_dim: int = 64, in_dim: int = 3):
+        super().__init__()
+        layers: list[nn.Module] = []
+        width = in_dim
+        for hidden in hidden_dims:
+            layers += [nn.Linear(width, hidden), nn.LayerNorm(hidden), nn.ReLU()]
+            width = hidden
+        self.mlp = nn.Sequential(*layers)
+        self.projection = nn.Sequential(nn.Linear(width, out_dim), nn.LayerNorm(out_dim))
+
+    def forward(self, points: torch.Tensor) -> torch.Tensor:
+        return self.projection(self.mlp(points).amax(dim=-2))
+
+
+class ResidualPointBlock(nn.Module):
+    """y = ReLU(LayerNorm(Linear(x))) + skip(x); skip is the identity, or a bias-free Linear when widths differ."""
+
+    def __init__(self, in_dim: int, out_dim: int):
+        super().__init__()
+        self.layer = nn.Sequential(nn.Linear(in_dim, out_dim), nn.LayerNorm(out_dim), nn.ReLU())
+        self.skip = nn.Identity() if in_dim == out_dim else nn.Linear(in_dim, out_dim, bias=False)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.layer(x) + self.skip(x)
+
+
+class ResidualPointEncoder(nn.Module):
+    """The paper's "MLP + residual" point encoder (its best: 68.8% vs 64.1% for the plain MLP).
+
+    The paper gives no layer details; this keeps DP3's widths and adds a residual connection around
+    every layer after the first (the xyz stem has no meaningful identity path). points (M, N, 3) -> (M, out_dim).
+    """
+
+    def __init__(self, hidden_dims: Sequence[int] = (64, 128, 256), out_dim: int = 64, in_dim: int = 3):
+        super().__init__()
+        dims = list(hidden_dims)
+        self.stem = nn.Sequential(nn.Linear(in_dim, dims[0]), nn.LayerNorm(dims[0]), nn.ReLU())
+        self.blocks = nn.Sequential(*[ResidualPointBlock(a, b) for a, b in zip(dims[:-1], dims[1:], strict=True)])
+        self.projection = nn.Sequential(nn.Linear(dims[-1], out_dim), nn.LayerNorm(out_dim))
+
+    def forward(self, points: torch.Tensor) -> torch.Tensor:
+        return self.projection(self.blocks(self.stem(points)).amax(dim=-2))
+
+
+def make_point_encoder(config: PolicyConfig) -> nn.Module:
+    cls = ResidualPointEncoder if config.point_encoder == "residual" else PointMLPEncoder
+    return cls(config.point_hidden_dims, config.encoder_out)
+
+
+class ObjectCloudsEncoder(nn.Module):
+    """One shared point encoder applied to each object slot; slot features concatenated in slot order.
+
+    clouds (M, K, N, 3) normalised -> (M, K * encoder_out). The concatenation keeps slots apart: the
+    feature of slot k always lands in the same input columns of the UNet's FiLM layers, so "the red bowl"
+    and "the pan" are different inputs even though they share the point encoder.
+    """
+
+    def __init__(self, config: PolicyConfig):
+        super().__init__()
+        self.n_slots = config.n_slots
+        self.point_encoder = make_point_encoder(config)
+        self.out_dim = config.n_slots * config.encoder_out
+
+    def forward(self, clouds: torch.Tensor) -> torch.Tensor:
+        if clouds.ndim != 4 or clouds.shape[1] != self.n_slots or clouds.shape[-1] != 3:
+            raise ValueError(f"object_clouds must be (batch, {self.n_slots} slots, points, 3), "
+                             f"got {tuple(clouds.shape)}")
+        m, k, n, _ = clouds.shape
+        features = self.point_encoder(clouds.reshape(m * k, n, 3))
+        return features.reshape(m, k * features.shape[-1])
+
+
+class SceneCloudEncoder(nn.Module):
+    """DP3 baseline: the same point encoder on the whole cropped scene cloud. (M, N, 3) -> (M, encoder_out)."""
+
+    def __init__(self, config: PolicyConfig):
+        super().__init__()
+        self.point_encoder = make_point_encoder(config)
+        self.out_dim = config.encoder_out
+
+    def forward(self, cloud: torch.Tensor) -> torch.Tensor:
+        if cloud.ndim != 3 or cloud.shape[-1] != 3:
+            raise ValueError(f"scene_cloud must be (batch, points, 3), got {tuple(cloud.shape)}")
+        return self.point_encoder(cloud)
+
+
+class _ResidualConvBlock(nn.Module):
+    def __init__(self, in_channels: int, out_channels: int, stride: int, groups: int):
+        super().__init__()
+        self.body = nn.Sequential(
+            nn.Conv2d(in_channels, out_channels, 3, stride, 1, bias=False), nn.GroupNorm(groups, out_channels),
+            nn.ReLU(), nn.Conv2d(out_channels, out_channels, 3, 1, 1, bias=False), nn.GroupNorm(groups, out_channels),
+        )
+        self.skip = (nn.Identity() if stride == 1 and in_channels == out_channels else nn.Sequential(
+            nn.Conv2d(in_channels, out_channels, 1, stride, bias=False), nn.GroupNorm(groups, out_channels)))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.relu(self.body(x) + self.skip(x))
+
+
+class SpatialSoftmax(nn.Module):
+    """Expected image coordinates of learned keypoints (Levine et al.; used by Diffusion Policy).
+
+    features (M, C, H, W) -> (M, 2 * keypoints), coordinates in [-1, 1]. Keeps where things are,
+    which global average pooling would throw away.
+    """
+
+    def __init__(self, channels: int, keypoints: int):
+        super().__init__()
+        self.keypoints = nn.Conv2d(channels, keypoints, 1)
+
+    def forward(self, features: torch.Tensor) -> torch.Tensor:
+        maps = self.keypoints(features)
+        m, k, h, w = maps.shape
+        attention = maps.reshape(m, k, h * w).softmax(dim=-1)
+        ys, xs = torch.meshgrid(torch.linspace(-1, 1, h, device=maps.device, dtype=maps.dtype),
+                                torch.linspace(-1, 1, w, device=maps.device, dtype=maps.dtype), indexing="ij")
+        grid = torch.stack([xs.reshape(-1), ys.reshape(-1)], dim=-1)  # (H*W, 2)
+        return (attention @ grid).reshape(m, 2 * k)
+
+
+class ImageEncoder(nn.Module):
+    """Diffusion Policy baseline: a small ResNet with GroupNorm and a spatial-softmax head.
+
+    rgb (M, H, W, 3) uint8 (or float in [0, 255]) -> (M, encoder_out). Written small rather than a
+    torchvision ResNet-18 (11 M parameters, ImageNet weights not available offline) so that it trains on CPU.
+    """
+
+    def __init__(self, config: PolicyConfig, widths: Sequence[int] = (32, 64, 128), groups: int = 8):
+        super().__init__()
+        self.stem = nn.Sequential(nn.Conv2d(3, widths[0], 5, 2, 2, bias=False), nn.GroupNorm(groups, widths[0]),
+                                  nn.ReLU())
+        blocks = []
+        width = widths[0]
+        for index, out in enumerate(widths):
+            blocks.append(_ResidualConvBlock(width, out, 1 if index == 0 else 2, groups))
+            width = out
+        self.blocks = nn.Sequential(*blocks)
+        self.pool = SpatialSoftmax(width, 32)
+        self.head = nn.Sequential(nn.Linear(64, config.encoder_out), nn.LayerNorm(config.encoder_out))
+        self.out_dim = config.encoder_out
+
+    def forward(self, rgb: torch.Tensor) -> torch.Tensor:
+        if rgb.ndim != 4 or rgb.shape[-1] != 3:
+            raise ValueError(f"rgb must be (batch, height, width, 3), got {tuple(rgb.shape)}")
+        image = rgb.permute(0, 3, 1, 2).float() / 127.5 - 1.0
+        return self.head(self.pool(self.blocks(self.stem(image))))
+
+
+class StateEncoder(nn.Module):
+    """DP3's state MLP: state (M, state_dim) normalised -> (M, state_feature_dim)."""
+
+    def __init__(self, config: PolicyConfig):
+        super().__init__()
+        self.mlp = nn.Sequential(nn.Linear(config.state_dim, config.state_feature_dim), nn.ReLU(),
+                                 nn.Linear(config.state_feature_dim, config.state_feature_dim))
+        self.out_dim = config.state_feature_dim
+
+    def forward(self, state: torch.Tensor) -> torch.Tensor:
+        return self.mlp(state)
+
+
+class ObservationEncoder(nn.Module):
+    """Normalised observation window -> the UNet's global condition.
+
+    obs {visual_key: (B, To, ...), "state": (B, To, state_dim)} -> (B, To * (visual + state features)).
+    """
+
+    def __init__(self, config: PolicyConfig):
+        super().__init__()
+        self.visual_key = config.visual_key
+        self.n_obs_steps = config.n_obs_steps
+        self.visual = {"objects": ObjectCloudsEncoder, "scene": SceneCloudEncoder, "image": ImageEncoder}[
+            config.obs_type](config)
+        self.state = StateEncoder(config)
+        self.step_dim = self.visual.out_dim + self.state.out_dim
+        self.out_dim = self.step_dim * config.n_obs_steps
+
+    def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
+        visual, state = obs[self.visual_key], obs["state"]
+        batch, steps = state.shape[:2]
+        if visual.shape[:2] != (batch, steps) or steps != self.n_obs_steps:
+            raise ValueError(f"observation windows must be (batch, n_obs_steps={self.n_obs_steps}, ...); got "
+                             f"{self.visual_key} {tuple(visual.shape)} and state {tuple(state.shape)}")
+        features = torch.cat([self.visual(visual.flatten(0, 1)), self.state(state.flatten(0, 1))], dim=-1)
+        return features.reshape(batch, steps * self.step_dim)

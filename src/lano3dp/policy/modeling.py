@@ -1,0 +1,287 @@
+"""DiffusionPolicy: P(action trajectory | object clouds, robot state) by DDPM, with cost-guided sampling.
+
+Training: `compute_loss` (epsilon prediction, Chi et al.). Inference: `predict_action_chunk`, whose
+denoising loop is `lano3dp.guidance.sampler.denoise`, so guided and unguided sampling share one loop.
+Checkpoints are folders: config.json + model.safetensors (weights and normaliser statistics) +
+normalizer.json (the same statistics, human-readable); loading never unpickles.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import NamedTuple
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from lano3dp.errors import CorruptFileError
+from lano3dp.policy.config import PolicyConfig
+from lano3dp.policy.encoders import ObservationEncoder
+from lano3dp.policy.normalizer import LinearNormalizer
+from lano3dp.policy.unet import ConditionalUnet1D
+
+CONFIG_NAME = "config.json"
+WEIGHTS_NAME = "model.safetensors"
+NORMALIZER_NAME = "normalizer.json"
+
+PositionCost = Callable[[torch.Tensor], torch.Tensor]
+
+
+class ActionChunk(NamedTuple):
+    """A sampled chunk, un-normalised (metres, 6D rotation, gripper command as predicted: threshold at 0.5).
+
+    actions: (B, n_action_steps, action_dim), the steps to execute: trajectory[:, To-1 : To-1+Ta].
+    trajectory: (B, horizon, action_dim), the whole sampled horizon (index To-1 is "now").
+    """
+
+    actions: torch.Tensor
+    trajectory: torch.Tensor
+
+    def numpy(self) -> ActionChunk:
+        return ActionChunk(self.actions.detach().cpu().numpy(), self.trajectory.detach().cpu().numpy())
+
+
+def make_scheduler(config: PolicyConfig, kind: str):
+    """A diffusers DDPM or DDIM scheduler with the policy's diffusion process (epsilon, clip_sample)."""
+    from diffusers import DDIMScheduler, DDPMScheduler
+
+    common = dict(num_train_timesteps=config.num_train_timesteps, beta_schedule=config.beta_schedule,
+                  clip_sample=config.clip_sample, prediction_type=config.prediction_type)
+    if kind == "ddpm":
+        return DDPMScheduler(variance_type="fixed_small", **common)
+    if kind == "ddim":
+        return DDIMScheduler(set_alpha_to_one=True, steps_offset=0, **common)
+    raise ValueError(f"unknown scheduler {kind!r}; use 'ddpm' or 'ddim'")
+
+
+class DiffusionPolicy(nn.Module):
+    """Object-centric 3D diffusion policy (or a baseline, by `config.obs_type`).
+
+    Observations: {"object_clouds": (B, To, K, N, 3) metres, world frame, slots in config.object_names order;
+    "state": (B, To, 11)}; the baselines use "scene_cloud" (B, To, N, 3) or "rgb" (B, To, H, W, 3) uint8.
+    """
+
+    def __init__(self, config: PolicyConfig):
+        super().__init__()
+        self.config = config
+        stats_dims = {"action": config.action_dim, "state": config.state_dim}
+        if config.obs_type != "image":  # images are scaled to [-1, 1] by the encoder, from uint8
+            stats_dims[config.visual_key] = 3
+        self.normalizer = LinearNormalizer(stats_dims)
+        self.obs_encoder = ObservationEncoder(config)
+        self.unet = ConditionalUnet1D(config.action_dim, self.obs_encoder.out_dim, config.diffusion_step_embed_dim,
+                                      config.down_dims, config.kernel_size, config.n_groups)
+        self.noise_scheduler = make_scheduler(config, "ddpm")
+        self._schedulers: dict[str, object] = {}
+
+    @property
+    def device(self) -> torch.device:
+        return next(self.parameters()).device
+
+    # ---- normaliser --------------------------------------------------------------------
+    def set_normalizer(self, stats: Mapping[str, Mapping[str, np.ndarray]]) -> None:
+        """Set min/max statistics: {"action": {"min": (10,), "max": (10,)}, "state": ..., visual key: (3,)}."""
+        self.normalizer.set_stats(stats)
+
+    def fit_normalizer(self, dataset) -> None:
+        """Fit the statistics on every step of a lano3dp.data.SequenceDataset's episodes."""
+        data = {"action": dataset.all_actions(), "state": dataset.all_obs("state")}
+        if self.config.obs_type != "image":
+            data[self.config.visual_key] = dataset.all_obs(self.config.visual_key)
+        self.normalizer.fit(data)
+
+    def normalizer_stats(self) -> dict[str, dict[str, np.ndarray]]:
+        return self.normalizer.stats()
+
+    # ---- observation -------------------------------------------------------------------
+    def _prepare_obs(self, obs: Mapping[str, np.ndarray | torch.Tensor]) -> dict[str, torch.Tensor]:
+        """Raw obs window (numpy or torch) -> normalised tensors of the last n_obs_steps steps."""
+        config = self.config
+        prepared = {}
+        for key in config.obs_keys:
+            if key not in obs:
+                raise KeyError(f"observation is missing {key!r}; a {config.obs_type!r} policy needs {config.obs_keys}")
+            value = torch.as_tensor(obs[key], device=self.device)
+            if key != "rgb":
+                value = value.float()
+            if value.ndim < 3 or value.shape[1] < config.n_obs_steps:
+                raise ValueError(f"{key} must be (batch, steps >= n_obs_steps={config.n_obs_steps}, ...), "
+                                 f"got {tuple(value.shape)}")
+            value = value[:, -config.n_obs_steps:]
+            if key in self.normalizer.keys:
+                value = self.normalizer.normalize(key, value)
+            prepared[key] = value
+        return prepared
+
+    def encode_obs(self, obs: Mapping[str, np.ndarray | torch.Tensor]) -> torch.Tensor:
+        """Raw observation window -> global condition (B, To * features)."""
+        return self.obs_encoder(self._prepare_obs(obs))
+
+    # ---- training ----------------------------------------------------------------------
+    def compute_loss(self, batch: Mapping, generator: torch.Generator | None = None) -> torch.Tensor:
+        """Epsilon-prediction MSE on a batch {"obs": {key: (B, To, ...)}, "action": (B, H, action_dim)}.
+
+        `generator` draws the diffusion noise and timesteps (None: torch's global RNG).
+        """
+        actions = torch.as_tensor(batch["action"], device=self.device).float()
+        if actions.shape[1:] != (self.config.horizon, self.config.action_dim):
+            raise ValueError(f"action batch must be (B, {self.config.horizon}, {self.config.action_dim}), "
+                             f"got {tuple(actions.shape)}")
+        cond = self.encode_obs(batch["obs"])
+        trajectory = self.normalizer.normalize("action", actions)
+        noise = torch.randn(trajectory.shape, generator=generator, device=self.device)
+        timesteps = torch.randint(0, self.config.num_train_timesteps, (trajectory.shape[0],), generator=generator,
+                                  device=self.device)
+        noisy = self.noise_scheduler.add_noise(trajectory, noise, timesteps)
+        return F.mse_loss(self.unet(noisy, timesteps, cond), noise)
+
+    def forward(self, batch: Mapping, generator: torch.Generator | None = None) -> torch.Tensor:
+        """Same as compute_loss; lets DistributedDataParallel see the call."""
+        return self.compute_loss(batch, generator)
+
+    # ---- inference ---------------------------------------------------------------------
+    def get_scheduler(self, kind: str | None = None):
+        """The cached inference scheduler ("ddpm" or "ddim"; default config.inference_scheduler)."""
+        kind = kind or self.config.inference_scheduler
+        if kind not in self._schedulers:
+            self._schedulers[kind] = make_scheduler(self.config, kind)
+        return self._schedulers[kind]
+
+    def predict_action_chunk(self, obs: Mapping[str, np.ndarray | torch.Tensor], *, guidance=None,
+                             position_cost: PositionCost | None = None, scheduler=None,
+                             num_inference_steps: int | None = None, generator: torch.Generator | None = None,
+                             initial_noise: torch.Tensor | None = None, on_step=None) -> ActionChunk:
+        """Sample an action chunk for a batch of observation windows.
+
+        Args:
+            obs: {visual key: (B, To, ...), "state": (B, To, 11)}, numpy or torch, raw units; the last
+                n_obs_steps steps are used.
+            guidance: lano3dp.guidance.GuidanceConfig, or None for plain sampling.
+            position_cost: metric EE positions (B, H, 3) -> cost (B,); required when guidance is enabled.
+                It sees the un-normalised A_0|k (or A_k), through a differentiable un-normalisation.
+            scheduler: "ddpm", "ddim", a diffusers scheduler instance, or None (config.inference_scheduler).
+            num_inference_steps: default config.num_inference_steps (DDPM: every training step).
+            generator: seeds the initial noise and DDPM's per-step noise.
+            initial_noise: (B, H, action_dim) A_T, to reproduce a sample exactly.
+            on_step: callback after every denoising step (lano3dp.guidance.sampler.DenoiseStep).
+
+        Returns:
+            ActionChunk(actions (B, Ta, D), trajectory (B, H, D)), un-normalised, on the policy's device.
+        """
+        from lano3dp.guidance.sampler import GuidanceMode, denoise
+
+        config = self.config
+        if scheduler is None or isinstance(scheduler, str):
+            kind = scheduler or config.inference_scheduler
+            scheduler = self.get_scheduler(kind)
+            if num_inference_steps is None:
+                num_inference_steps = config.num_inference_steps if kind == "ddim" else None
+        guided = guidance is not None and guidance.mode is not GuidanceMode.NONE
+        if guided and position_cost is None:
+            raise ValueError("guidance was requested but no position_cost was given (build one from the obstacles)")
+        was_training = self.training
+        self.eval()
+        try:
+            with torch.no_grad():
+                cond = self.encode_obs(obs)
+            batch = cond.shape[0]
+
+            def noise_fn(sample: torch.Tensor, timesteps: torch.Tensor) -> torch.Tensor:
+                return self.unet(sample, timesteps.to(sample.device), cond)
+
+            def cost_fn(trajectory: torch.Tensor) -> torch.Tensor:
+                return position_cost(self.normalizer.unnormalize("action", trajectory)[..., :3])
+
+            if initial_noise is not None:
+                initial_noise = torch.as_tensor(initial_noise, device=self.device).float()
+                expected = (batch, config.horizon, config.action_dim)
+                if tuple(initial_noise.shape) != expected:
+                    raise ValueError(f"initial_noise must be {expected}, got {tuple(initial_noise.shape)}")
+            normalised = denoise(noise_fn, scheduler, (batch, config.horizon, config.action_dim),
+                                 num_inference_steps=num_inference_steps, generator=generator, guidance=guidance,
+                                 cost_fn=cost_fn if guided else None, initial_noise=initial_noise, on_step=on_step)
+            with torch.no_grad():
+                trajectory = self.normalizer.unnormalize("action", normalised.detach())
+        finally:
+            self.train(was_training)
+        start = config.n_obs_steps - 1
+        return ActionChunk(trajectory[:, start:start + config.n_action_steps], trajectory)
+
+    # ---- persistence -------------------------------------------------------------------
+    def save_pretrained(self, directory: str | Path) -> Path:
+        """Write config.json, model.safetensors and normalizer.json into `directory` (created if needed)."""
+        from safetensors.torch import save_file
+
+        directory = Path(directory)
+        directory.mkdir(parents=True, exist_ok=True)
+        state = {key: value.detach().cpu().contiguous() for key, value in self.state_dict().items()}
+        save_file(state, str(directory / WEIGHTS_NAME), metadata={"format": "lano3dp-policy"})
+        stats = {key: {name: value.tolist() for name, value in item.items()}
+                 for key, item in self.normalizer_stats().items()}
+        _write_text(directory / NORMALIZER_NAME, json.dumps(stats, indent=2))
+        _write_text(directory / CONFIG_NAME, self.config.to_json() + "\n")
+        return directory
+
+    @classmethod
+    def from_pretrained(cls, directory: str | Path, device: str | torch.device = "cpu") -> DiffusionPolicy:
+        """Load a folder written by save_pretrained, or a training run's folder (its last checkpoint).
+
+        Raises:
+            FileNotFoundError: no checkpoint there.
+            CorruptFileError: config.json or model.safetensors is truncated, unparsable or inconsistent.
+        """
+        directory = resolve_checkpoint(directory)
+        config = load_config(directory / CONFIG_NAME)
+        policy = cls(config)
+        state = load_safetensors(directory / WEIGHTS_NAME)
+        try:
+            policy.load_state_dict(state, strict=True)
+        except RuntimeError as error:
+            raise CorruptFileError(directory / WEIGHTS_NAME, f"weights do not match config.json: {error}") from error
+        if not bool(policy.normalizer.fitted):
+            raise CorruptFileError(directory / WEIGHTS_NAME, "holds no normaliser statistics")
+        return policy.to(device).eval()
+
+
+def _write_text(path: Path, text: str) -> None:
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text(text)
+    os.replace(temporary, path)
+
+
+def resolve_checkpoint(directory: str | Path) -> Path:
+    """A policy folder; a training run's folder resolves to <run>/checkpoints/last."""
+    directory = Path(directory)
+    if (directory / CONFIG_NAME).exists() or (directory / WEIGHTS_NAME).exists():
+        return directory
+    last = directory / "checkpoints" / "last"
+    if last.exists():
+        return last.resolve()
+    raise FileNotFoundError(f"no policy checkpoint in {directory} (expected {CONFIG_NAME} and {WEIGHTS_NAME}, "
+                            "or checkpoints/last of a training run)")
+
+
+def load_config(path: Path) -> PolicyConfig:
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist")
+    try:
+        return PolicyConfig.from_json(path.read_text())
+    except (ValueError, TypeError, UnicodeDecodeError) as error:  # JSONDecodeError is a ValueError
+        raise CorruptFileError(path, f"not a valid policy config ({type(error).__name__}: {error})") from error
+
+
+def load_safetensors(path: Path) -> dict[str, torch.Tensor]:
+    """Read a safetensors file; any damage becomes a CorruptFileError naming the file."""
+    from safetensors.torch import load_file
+
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist")
+    try:
+        return load_file(str(path))
+    except Exception as error:  # safetensors raises SafetensorError / OSError / ValueError on damage
+        raise CorruptFileError(path, f"unreadable safetensors file ({type(error).__name__}: {error})") from error

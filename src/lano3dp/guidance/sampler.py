@@ -24,6 +24,13 @@ all ten. Each guided step applies one push of rho (the paper's Algorithm 1, per 
 rho pushes DDIM-10 with S = 100 about as often as DDPM-100 with S = 10. With `per_train_step`,
 rho is multiplied by the stride (training steps per inference step) instead, which keeps the total
 push across a window of S training steps the same as DDPM's; measured in bench/bench_guidance.py.
+
+clip_sample. Diffusion Policy's schedulers clip their x_0 estimate to [-1, 1], the normaliser's
+range of the demonstrations. A detour around an obstacle the demonstrations never saw often has to
+leave that range, and then every clipped step undoes the pushes before it, so only the very last
+push survives (measured on the analytic prior in tests/test_guidance_sampler.py). By default the
+guided steps therefore use an unclipped copy of the scheduler (`clip_guided_steps=False`); unguided
+steps, and every step of an unguided run, keep the scheduler's clipping.
 """
 
 from __future__ import annotations
@@ -56,12 +63,15 @@ class GuidanceConfig:
         last_steps: S; guide only while the training-scale step k = t + 1 <= S (100 = every step).
         per_train_step: multiply rho by the scheduler stride (num_train_timesteps / num_inference_steps),
             so fewer, longer inference steps push as much in total as DDPM-100 (see the module docstring).
+        clip_guided_steps: keep the scheduler's clip_sample on guided steps (False: guided steps are unclipped,
+            so a push beyond the demonstrations' range is not undone; see the module docstring).
     """
 
     mode: GuidanceMode = GuidanceMode.CLEAN
     scale: float = 1.0
     last_steps: int = 10
     per_train_step: bool = False
+    clip_guided_steps: bool = False
 
     def __post_init__(self):
         object.__setattr__(self, "mode", GuidanceMode(self.mode))
@@ -140,6 +150,10 @@ def denoise(
     scheduler.set_timesteps(num_inference_steps)
     stride = scheduler.config.num_train_timesteps / num_inference_steps
     step_scale = guidance.scale * (stride if guidance.per_train_step else 1.0)
+    guided_scheduler = scheduler
+    if guidance.enabled and not guidance.clip_guided_steps and getattr(scheduler.config, "clip_sample", False):
+        guided_scheduler = type(scheduler).from_config(scheduler.config, clip_sample=False)
+        guided_scheduler.set_timesteps(num_inference_steps)
     alphas_cumprod = scheduler.alphas_cumprod.to(dtype)
     sample = initial_noise.to(dtype).clone() if initial_noise is not None else torch.randn(
         shape, generator=generator, dtype=dtype)
@@ -169,7 +183,8 @@ def denoise(
                     cost = cost_fn(sample_var)
                     gradient = _cost_gradient(cost, sample_var)
                 cost = cost.detach()
-        next_sample = scheduler.step(noise, t, sample, generator=generator).prev_sample
+        step_scheduler = guided_scheduler if guided else scheduler
+        next_sample = step_scheduler.step(noise, t, sample, generator=generator).prev_sample
         if guided:
             next_sample = next_sample - step_scale * gradient  # Algorithm 1, line 7
         if on_step is not None:

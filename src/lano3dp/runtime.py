@@ -1,0 +1,519 @@
+"""Closed-loop runtime: frames -> policy observation window -> (guided) action chunk -> env steps.
+
+The loop of the paper's deployment phase (Fig. 1), for any environment that meets the simulator
+protocol (`lano3dp.sim.protocol`): `reset(seed, options) -> (obs, info)` and
+`step(action (10,)) -> (obs, reward, terminated, truncated, info)`, where `obs` carries an
+`RGBDFrame` and the 11-D robot state.
+
+    PolicyRunner     keeps the last n_obs_steps observations (the policy's window), turns each frame into
+                     the policy's visual input (object clouds / scene cloud / 96x96 RGB), turns obstacle
+                     phrases into guidance costs, samples a chunk and hands out its n_action_steps
+                     actions one by one before re-planning (receding horizon, as Diffusion Policy).
+    rollout          runs one episode with a runner and measures it (success, obstacle contacts, minimum
+                     clearance, EE path length, latency per chunk).
+
+Obstacles become costs the paper's way: segment the obstacle, fit a vertical cylinder to its points
+(`guidance.fitting.fit_cylinder`) and hinge the xy distance of every waypoint at
+Q* = obstacle radius + held-object extent + margin (`guidance.costs.Cylinder.safety_distance`).
+The held object's extent is measured from its own cloud (the paper used the bowl's diameter,
+because the gripper holds the bowl by its rim).
+
+This module imports torch and the policy/guidance layers but never the simulator: the env is
+duck-typed, so a user's own robot plugs in the same way.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+
+from lano3dp.errors import Lano3dpError
+from lano3dp.geometry.frame import RGBDFrame
+from lano3dp.guidance.checked import CheckConfig, checked_sample
+from lano3dp.guidance.costs import ObstacleSet, PointCloudObstacle, PositionCost
+from lano3dp.guidance.fitting import fit_box, fit_cylinder
+from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
+
+OBSTACLE_SHAPES = ("cylinder", "box", "points")
+
+
+class ClosedLoopError(Lano3dpError, RuntimeError):
+    """The closed loop cannot continue (e.g. no collision-free chunk under checked execution)."""
+
+
+@dataclass(frozen=True)
+class ObstacleModel:
+    """How an obstacle's segmented points become a guidance cost.
+
+    Attributes:
+        shape: "cylinder" (the paper: vertical cylinder, xy hinge), "box" (yaw-oriented box) or
+            "points" (nearest segmented point).
+        margin: metres beyond contact at which the cost starts pushing (part of Q*).
+        held_radius: metres around the EE point that must stay clear (gripper + held object). None: measure
+            it from the held object's cloud (`held_object` of the runner) as `held_extent` x its fitted radius.
+        held_extent: multiple of the held object's fitted radius; 2.0 = its diameter (the paper's choice, as a
+            rim grasp puts the object's far side a diameter away from the EE).
+        gripper_radius: lower bound of the held radius (m): the fingers themselves.
+        xy_only: measure distances in the horizontal plane only (the paper's setting).
+        refit_every_chunk: re-segment and re-fit obstacles before every chunk (moving obstacles); by default
+            they are fitted once, on the first frame of the episode, before the arm can occlude them.
+    """
+
+    shape: str = "cylinder"
+    margin: float = 0.02
+    held_radius: float | None = None
+    held_extent: float = 2.0
+    gripper_radius: float = 0.02
+    xy_only: bool = True
+    refit_every_chunk: bool = False
+
+    def __post_init__(self):
+        if self.shape not in OBSTACLE_SHAPES:
+            raise ValueError(f"obstacle shape must be one of {OBSTACLE_SHAPES}, got {self.shape!r}")
+        if self.margin < 0 or self.gripper_radius < 0 or self.held_extent < 0:
+            raise ValueError(f"margin, gripper_radius and held_extent must be >= 0 in {self}")
+        if self.held_radius is not None and self.held_radius < 0:
+            raise ValueError(f"held_radius must be >= 0, got {self.held_radius}")
+
+    def fit(self, points: np.ndarray, held_radius: float) -> PositionCost:
+        """(N, 3) world-frame obstacle points -> a cost whose safety distance includes `held_radius` (m)."""
+        if self.shape == "cylinder":
+            return fit_cylinder(points, held_radius=held_radius, margin=self.margin, xy_only=self.xy_only)
+        if self.shape == "box":
+            return fit_box(points, held_radius=held_radius, margin=self.margin, xy_only=self.xy_only)
+        return PointCloudObstacle(points, held_radius=held_radius, margin=self.margin, xy_only=self.xy_only)
+
+
+@dataclass(frozen=True)
+class RuntimeConfig:
+    """How the runner samples and executes.
+
+    Attributes:
+        guidance: None or mode "none" for plain sampling; else the paper's guidance (mode "clean") or A_k guidance.
+        scheduler: "ddpm" or "ddim" (None: the policy's configured inference scheduler).
+        num_inference_steps: denoising steps (None: the policy's default for that scheduler).
+        n_action_steps: actions executed per chunk before re-planning (None: the policy's n_action_steps).
+        obstacle: how obstacles become costs.
+        checked: re-sample a chunk with a larger rho while its executed part still collides (None: off).
+        on_unclear: under checked execution, what to do when no try is clear: "execute" the clearest try anyway
+            (and count it) or "stop" the episode.
+        seed: seeds the sampling noise (one torch.Generator per runner, re-seeded on reset).
+    """
+
+    guidance: GuidanceConfig | None = None
+    scheduler: str | None = None
+    num_inference_steps: int | None = None
+    n_action_steps: int | None = None
+    obstacle: ObstacleModel = field(default_factory=ObstacleModel)
+    checked: CheckConfig | None = None
+    on_unclear: str = "execute"
+    seed: int = 0
+
+    def __post_init__(self):
+        if self.on_unclear not in ("execute", "stop"):
+            raise ValueError(f"on_unclear must be 'execute' or 'stop', got {self.on_unclear!r}")
+        if self.n_action_steps is not None and self.n_action_steps < 1:
+            raise ValueError(f"n_action_steps must be >= 1, got {self.n_action_steps}")
+
+    @property
+    def guided(self) -> bool:
+        return self.guidance is not None and self.guidance.mode is not GuidanceMode.NONE and self.guidance.scale > 0
+
+    def to_dict(self) -> dict[str, Any]:
+        data = asdict(self)
+        if self.guidance is not None:
+            data["guidance"] = {"mode": self.guidance.mode.value, "scale": self.guidance.scale,
+                                "last_steps": self.guidance.last_steps}
+        return data
+
+
+@dataclass
+class ChunkRecord:
+    """One planning call.
+
+    Attributes:
+        step: env step at which the chunk was planned.
+        latency_s: wall time of perception + sampling (+ re-tries), seconds.
+        sample_s: wall time of sampling alone (all tries), seconds.
+        tries: samples drawn (1 unless checked execution re-sampled).
+        scale: rho of the executed sample (0 when unguided).
+        predicted_clearance: smallest clearance (m) of the executed waypoints to the fitted obstacles, as the
+            runner sees them (None without obstacles).
+        clear: False when checked execution found no collision-free try.
+        trajectory: (H, 10) the whole sampled horizon (metric).
+    """
+
+    step: int
+    latency_s: float
+    sample_s: float
+    tries: int = 1
+    scale: float = 0.0
+    predicted_clearance: float | None = None
+    clear: bool = True
+    trajectory: np.ndarray | None = None
+
+
+def observe(env, obs: Any) -> tuple[RGBDFrame, np.ndarray]:
+    """The env's observation -> (frame, state (11,) float32).
+
+    The frame is `obs["frame"]` when the observation carries one, else `env.frame()` (the simulator's
+    RGBDFrame with ground-truth instances), else it is assembled from the observation's "rgb", "depth",
+    "intrinsics" and "cam_to_world" (and "segmentation" when present).
+    """
+    if isinstance(obs, Mapping):
+        if "state" not in obs:
+            raise KeyError(f"observation needs a 'state' (11,), got keys {sorted(obs)}")
+        state = obs["state"]
+        if "frame" in obs:
+            frame = obs["frame"]
+        elif callable(getattr(env, "frame", None)):
+            frame = env.frame()
+        else:
+            from lano3dp.geometry.camera import PinholeCamera
+
+            depth = np.asarray(obs["depth"], dtype=np.float32)
+            height, width = depth.shape
+            rgb = obs.get("rgb")
+            frame = RGBDFrame(rgb=np.zeros((height, width, 3), np.uint8) if rgb is None else rgb, depth=depth,
+                              camera=PinholeCamera(width, height, obs["intrinsics"], obs["cam_to_world"]),
+                              segmentation=obs.get("segmentation"))
+    else:
+        frame, state = obs.frame, obs.state
+    if not isinstance(frame, RGBDFrame):
+        raise TypeError(f"observation 'frame' must be an RGBDFrame, got {type(frame).__name__}")
+    state = np.asarray(state, dtype=np.float32)
+    if state.shape != (11,):
+        raise ValueError(f"robot state must be (11,), got {state.shape}")
+    return frame, state
+
+
+def scene_obstacles(frame: RGBDFrame) -> list[str]:
+    """Names of the objects the simulator marks as obstacles (ground truth; for evaluation defaults)."""
+    return sorted(name for name, attributes in frame.instance_attributes.items()
+                  if attributes.get("role") == "obstacle")
+
+
+def resize_rgb(rgb: np.ndarray, size: int) -> np.ndarray:
+    """(H, W, 3) uint8 -> (size, size, 3) uint8 by area averaging (antialiased), as the image baseline sees it."""
+    if rgb.shape[:2] == (size, size):
+        return np.ascontiguousarray(rgb, dtype=np.uint8)
+    image = torch.from_numpy(np.ascontiguousarray(rgb)).permute(2, 0, 1)[None].float()
+    resized = torch.nn.functional.interpolate(image, size=(size, size), mode="bilinear", antialias=True,
+                                              align_corners=False)
+    return resized[0].permute(1, 2, 0).round().clamp(0, 255).to(torch.uint8).numpy()
+
+
+class PolicyRunner:
+    """Receding-horizon controller around a `DiffusionPolicy`.
+
+    Args:
+        policy: anything with `config` (PolicyConfig) and `predict_action_chunk` (DiffusionPolicy).
+        observer: an `ObjectObserver` (segmenter + FPS); needed for "objects" policies and for obstacles.
+        config: sampling / guidance / execution settings.
+        target_phrases: words naming the policy's object slots in this scene, in slot order (default: the
+            policy's `object_names`), e.g. ("blue bowl", "pan") among look-alikes.
+        obstacle_phrases: objects to avoid; each becomes a cost (needs `observer`).
+        held_object: phrase of the object the gripper carries, whose extent enlarges Q* (default: the first
+            target of an "objects" policy; None or "" for nothing held).
+        visual_fn: frame -> visual input of one step, overriding the default for the policy's obs_type
+            (e.g. the scene-cloud settings the dataset was recorded with).
+    """
+
+    def __init__(self, policy, observer=None, config: RuntimeConfig | None = None, *,
+                 target_phrases: Sequence[str] | None = None, obstacle_phrases: Sequence[str] = (),
+                 held_object: str | None = "__first_target__",
+                 visual_fn: Callable[[RGBDFrame], np.ndarray] | None = None):
+        self.policy = policy
+        self.policy_config = policy.config
+        self.observer = observer
+        self.config = config or RuntimeConfig()
+        pc = self.policy_config
+        self.n_obs_steps = int(pc.n_obs_steps)
+        self.n_action_steps = int(self.config.n_action_steps or pc.n_action_steps)
+        if self.n_action_steps > pc.horizon - pc.n_obs_steps + 1:
+            raise ValueError(f"n_action_steps {self.n_action_steps} exceeds what one chunk holds "
+                             f"(horizon {pc.horizon} - n_obs_steps {pc.n_obs_steps} + 1)")
+        self.target_phrases = tuple(target_phrases) if target_phrases is not None else tuple(pc.object_names)
+        if pc.obs_type == "objects":
+            if len(self.target_phrases) != len(pc.object_names):
+                raise ValueError(f"the policy has {len(pc.object_names)} object slots {tuple(pc.object_names)} but "
+                                 f"{len(self.target_phrases)} target phrases were given: {self.target_phrases}")
+            if observer is None and visual_fn is None:
+                raise ValueError("an 'objects' policy needs an observer (segmenter) to build its object clouds")
+        self.obstacle_phrases = tuple(obstacle_phrases)
+        if self.obstacle_phrases and observer is None:
+            raise ValueError(f"obstacles {self.obstacle_phrases} need an observer to segment them")
+        if held_object == "__first_target__":
+            held_object = self.target_phrases[0] if (pc.obs_type == "objects" and self.target_phrases) else None
+        self.held_object = held_object or None
+        self.visual_fn = visual_fn or self._default_visual
+        self.history: deque[dict[str, np.ndarray]] = deque(maxlen=self.n_obs_steps)
+        self.queue: deque[np.ndarray] = deque()
+        self.chunks: list[ChunkRecord] = []
+        self.obstacle_cost: PositionCost | None = None
+        self.held_radius: float | None = None
+        self.step_count = 0
+        self.stopped_reason: str | None = None
+        self.generator = torch.Generator().manual_seed(self.config.seed)
+
+    # ---- episode ---------------------------------------------------------------------------
+    def reset(self, seed: int | None = None) -> None:
+        """Forget the window, the queued actions and the fitted obstacles; re-seed the sampling noise."""
+        self.history.clear()
+        self.queue.clear()
+        self.chunks = []
+        self.obstacle_cost = None
+        self.held_radius = None
+        self.step_count = 0
+        self.stopped_reason = None
+        self.generator = torch.Generator().manual_seed(self.config.seed if seed is None else int(seed))
+
+    # ---- observations ------------------------------------------------------------------------
+    def _default_visual(self, frame: RGBDFrame) -> np.ndarray:
+        pc = self.policy_config
+        if pc.obs_type == "objects":
+            return self.observer.observe(frame, self.target_phrases).points
+        if pc.obs_type == "scene":
+            from lano3dp.perception.observer import scene_cloud
+
+            observer = self.observer
+            low = None if observer is None else observer.crop_low
+            high = None if observer is None else observer.crop_high
+            return scene_cloud(frame, n_points=pc.scene_points, crop_low=low, crop_high=high)
+        return resize_rgb(frame.rgb, pc.image_size)
+
+    def push(self, frame: RGBDFrame, state: np.ndarray) -> None:
+        """Add one observation (frame, state (11,)) to the window; the first one also fits the obstacles."""
+        visual = np.asarray(self.visual_fn(frame))
+        self.history.append({"visual": visual, "state": np.asarray(state, dtype=np.float32)})
+        if self.obstacle_phrases and (self.obstacle_cost is None or
+                                      (self.config.obstacle.refit_every_chunk and not self.queue)):
+            self.obstacle_cost = self.fit_obstacles(frame)
+
+    def policy_obs(self) -> dict[str, np.ndarray]:
+        """The window as the policy's obs dict: {visual key: (1, To, ...), "state": (1, To, 11)}.
+
+        Before To observations exist the oldest one is repeated (Diffusion Policy's edge padding, which is
+        also how the training windows are padded at an episode's start).
+        """
+        if not self.history:
+            raise ValueError("no observation yet: call push(frame, state) first")
+        steps = list(self.history)
+        steps = [steps[0]] * (self.n_obs_steps - len(steps)) + steps
+        return {
+            self.policy_config.visual_key: np.stack([s["visual"] for s in steps])[None],
+            "state": np.stack([s["state"] for s in steps])[None],
+        }
+
+    # ---- obstacles -------------------------------------------------------------------------
+    def measure_held_radius(self, frame: RGBDFrame) -> float:
+        """Metres around the EE point to keep clear: the held object's extent, at least the gripper's."""
+        model = self.config.obstacle
+        if model.held_radius is not None:
+            return float(model.held_radius)
+        if not self.held_object:
+            return model.gripper_radius
+        points = self.observer.observe(frame, [self.held_object]).points[0]
+        radius = fit_cylinder(points).radius
+        return max(model.gripper_radius, model.held_extent * radius)
+
+    def fit_obstacles(self, frame: RGBDFrame) -> PositionCost:
+        """Segment every obstacle phrase in `frame` and fit its cost (see ObstacleModel)."""
+        self.held_radius = self.measure_held_radius(frame)
+        clouds = self.observer.observe(frame, self.obstacle_phrases)
+        costs = [self.config.obstacle.fit(points, self.held_radius) for points in clouds.points]
+        return ObstacleSet(costs)
+
+    # ---- acting ----------------------------------------------------------------------------
+    def plan(self) -> ChunkRecord:
+        """Sample a chunk from the current window and queue its n_action_steps actions."""
+        started = time.perf_counter()
+        obs = self.policy_obs()
+        cfg = self.config
+        guidance = cfg.guidance if cfg.guided and self.obstacle_cost is not None else None
+        cost = self.obstacle_cost
+
+        def sample(guide: GuidanceConfig | None):
+            chunk = self.policy.predict_action_chunk(
+                obs, guidance=guide, position_cost=cost if guide is not None else None,
+                scheduler=cfg.scheduler, num_inference_steps=cfg.num_inference_steps, generator=self.generator)
+            return chunk
+
+        sample_started = time.perf_counter()
+        record = ChunkRecord(step=self.step_count, latency_s=0.0, sample_s=0.0)
+        if cfg.checked is not None and cost is not None:
+            check = CheckConfig(**{**asdict(cfg.checked), "n_execute": self.n_action_steps})
+            state = torch.as_tensor(self.history[-1]["state"][:3])[None]
+            start = self.policy_config.n_obs_steps - 1
+
+            def sample_fn(guide: GuidanceConfig):
+                chunk = sample(guide if guide.mode is not GuidanceMode.NONE else None)
+                return chunk.trajectory[:, start:, :3].float(), chunk
+
+            result = checked_sample(sample_fn, cost, guidance, check, start_position=state)
+            chunk = result.payload
+            record.tries = result.tries
+            record.scale = result.guidance.scale if result.guidance.mode is not GuidanceMode.NONE else 0.0
+            record.clear = result.success
+            record.predicted_clearance = float(result.min_clearance.min())
+        else:
+            chunk = sample(guidance)
+            record.scale = guidance.scale if guidance is not None else 0.0
+            if cost is not None:
+                with torch.no_grad():
+                    executed = chunk.actions[:, : self.n_action_steps, :3].float()
+                    record.predicted_clearance = float(cost.clearance(executed).min())
+        record.sample_s = time.perf_counter() - sample_started
+        actions = chunk.actions[0, : self.n_action_steps].detach().cpu().numpy().astype(np.float32)
+        record.trajectory = chunk.trajectory[0].detach().cpu().numpy().astype(np.float32)
+        record.latency_s = time.perf_counter() - started
+        self.chunks.append(record)
+        if not record.clear and cfg.on_unclear == "stop":
+            self.stopped_reason = "no collision-free chunk"
+            raise ClosedLoopError(f"no collision-free chunk at step {self.step_count} after {record.tries} tries "
+                                  f"(up to rho={record.scale:g}); predicted clearance "
+                                  f"{record.predicted_clearance:.3f} m")
+        self.queue.extend(actions)
+        return record
+
+    def act(self, frame: RGBDFrame, state: np.ndarray) -> np.ndarray:
+        """Observe, re-plan when the queue is empty, and return the next (10,) absolute EE action."""
+        self.push(frame, state)
+        if not self.queue:
+            self.plan()
+        self.step_count += 1
+        return self.queue.popleft()
+
+
+@dataclass
+class EpisodeResult:
+    """What one closed-loop episode measured.
+
+    Attributes:
+        seed: the env reset seed.
+        success: the task's success check held at some step.
+        steps: env steps taken.
+        collided: the robot or held object touched an obstacle (simulator contact events).
+        n_collision_steps: steps with at least one obstacle contact.
+        min_clearance: smallest true distance (m) between robot/held object and any obstacle, from the
+            simulator (None when the env reports none, e.g. no obstacle).
+        path_length: EE path length (m), from the robot state.
+        chunk_latency_s: perception + sampling time of every chunk, seconds.
+        chunk_tries: samples drawn per chunk (checked execution).
+        chunk_predicted_clearance: per chunk, the runner's own clearance estimate of the executed waypoints.
+        ee_path: (steps + 1, 3) EE positions, metres (kept for plots; dropped from JSON by default).
+        obstacles: fitted obstacle shapes (repr) the runner guided against.
+        held_radius: m, the held extent used in Q*.
+        error: why the episode ended early (perception failure, no clear chunk), or None.
+        wall_s: wall time of the episode, seconds.
+    """
+
+    seed: int
+    success: bool
+    steps: int
+    collided: bool
+    n_collision_steps: int
+    min_clearance: float | None
+    path_length: float
+    chunk_latency_s: list[float]
+    chunk_tries: list[int]
+    chunk_predicted_clearance: list[float | None]
+    ee_path: np.ndarray
+    obstacles: list[str] = field(default_factory=list)
+    held_radius: float | None = None
+    error: str | None = None
+    wall_s: float = 0.0
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self, include_path: bool = False) -> dict[str, Any]:
+        data = asdict(self)
+        data["ee_path"] = self.ee_path.round(5).tolist() if include_path else None
+        if not include_path:
+            data.pop("ee_path")
+        return data
+
+
+def path_length(positions: np.ndarray) -> float:
+    """Sum of segment lengths of a (T, 3) path, metres."""
+    positions = np.asarray(positions, dtype=np.float64)
+    if len(positions) < 2:
+        return 0.0
+    return float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum())
+
+
+def _obstacle_contact(info: Mapping[str, Any]) -> bool:
+    """Whether this step's info reports contact with an obstacle (a list of contact events)."""
+    return len(info.get("obstacle_contacts", ())) > 0
+
+
+def _clearance(info: Mapping[str, Any]) -> float | None:
+    value = info.get("min_obstacle_clearance")
+    return None if value is None or not np.isfinite(value) else float(value)
+
+
+def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] | None = None,
+            max_steps: int | None = None, on_frame: Callable[[RGBDFrame, Mapping[str, Any]], None] | None = None,
+            stop_on_success: bool = True) -> EpisodeResult:
+    """Run one closed-loop episode and measure it.
+
+    Args:
+        env: meets the simulator protocol; `info` may carry "success" (bool), "obstacle_contacts"
+            (this step's contact events with obstacles) and "min_obstacle_clearance" (m; inf without obstacles).
+        runner: the controller; it is reset here with `seed`.
+        seed: env reset seed (and the runner's sampling seed).
+        max_steps: step limit (default: the env's own truncation).
+        on_frame: called with every frame and info (videos).
+        stop_on_success: end the episode at the first step whose info says success.
+    """
+    started = time.perf_counter()
+    runner.reset(seed)
+    obs, info = env.reset(seed=seed, options=dict(options or {}))
+    frame, state = observe(env, obs)
+    positions = [state[:3].copy()]
+    success = bool(info.get("success", False))
+    collided = _obstacle_contact(info)
+    n_collision_steps = int(collided)
+    clearances = [c for c in [_clearance(info)] if c is not None]
+    if on_frame is not None:
+        on_frame(frame, info)
+    steps, error = 0, None
+    while not (success and stop_on_success):
+        if max_steps is not None and steps >= max_steps:
+            break
+        try:
+            action = runner.act(frame, state)
+        except Lano3dpError as failure:  # perception or checked execution: the episode fails, the eval goes on
+            error = f"{type(failure).__name__}: {failure}"
+            break
+        obs, _reward, terminated, truncated, info = env.step(action)
+        steps += 1
+        frame, state = observe(env, obs)
+        positions.append(state[:3].copy())
+        success = success or bool(info.get("success", False))
+        contact = _obstacle_contact(info)
+        collided = collided or contact
+        n_collision_steps += int(contact)
+        if (clearance := _clearance(info)) is not None:
+            clearances.append(clearance)
+        if on_frame is not None:
+            on_frame(frame, info)
+        if terminated or truncated:
+            break
+    ee_path = np.asarray(positions, dtype=np.float32)
+    return EpisodeResult(
+        seed=int(seed), success=success, steps=steps, collided=collided, n_collision_steps=n_collision_steps,
+        min_clearance=float(min(clearances)) if clearances else None, path_length=path_length(ee_path),
+        chunk_latency_s=[round(c.latency_s, 5) for c in runner.chunks],
+        chunk_tries=[c.tries for c in runner.chunks],
+        chunk_predicted_clearance=[None if c.predicted_clearance is None else round(c.predicted_clearance, 5)
+                                   for c in runner.chunks],
+        ee_path=ee_path,
+        obstacles=[repr(o) for o in runner.obstacle_cost] if isinstance(runner.obstacle_cost, ObstacleSet) else [],
+        held_radius=runner.held_radius, error=error, wall_s=time.perf_counter() - started,
+    )

@@ -1,0 +1,312 @@
+"""The closed-loop runtime against a fake env and a fake policy (fast, no simulator, no training).
+
+The scene is analytic (perception.synthetic boxes seen from above) and goes through the real
+ground-truth segmenter and ObjectObserver, so the obstacle -> cylinder -> Q* wiring is the real one.
+The fake policy draws a straight line from the EE to the pan; when guided it descends the cost it is
+handed, as the guided sampler would, so guidance visibly bends the path.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import torch
+
+from lano3dp.errors import Lano3dpError
+from lano3dp.geometry.rotations import matrix_to_rot6d
+from lano3dp.guidance import CheckConfig, Cylinder, GuidanceConfig
+from lano3dp.perception import ObjectObserver, SimOracleSegmenter
+from lano3dp.perception.synthetic import Box, render_boxes, top_down_camera
+from lano3dp.policy import ActionChunk, PolicyConfig
+from lano3dp.runtime import (
+    ClosedLoopError,
+    ObstacleModel,
+    PolicyRunner,
+    RuntimeConfig,
+    observe,
+    path_length,
+    resize_rgb,
+    rollout,
+    scene_obstacles,
+)
+
+BOWL = Box("bowl", (-0.25, 0.0), (0.10, 0.10, 0.05), {"kind": "bowl", "color": "red", "role": "target"})
+PAN = Box("pan", (0.30, 0.0), (0.14, 0.14, 0.03), {"kind": "pan", "color": "black", "role": "target"})
+OBSTACLE = Box("obstacle_0", (0.02, 0.0), (0.06, 0.06, 0.30), {"kind": "cylinder", "color": "grey",
+                                                                 "role": "obstacle"})
+START = np.array([-0.25, 0.0, 0.25])
+ROT6D = matrix_to_rot6d(np.eye(3)).astype(np.float32)
+
+
+class FakeEnv:
+    """A point end effector over a static table: each action's position is reached exactly.
+
+    Contact: the EE (a sphere of `body_radius`) overlaps the obstacle's footprint in xy; clearance is the
+    xy gap to the obstacle's square footprint minus `body_radius`.
+    """
+
+    def __init__(self, boxes, max_steps: int = 40, body_radius: float = 0.02, success_radius: float = 0.03):
+        self.frame_ = render_boxes(top_down_camera(size=64, height=1.2, fovy_deg=50, tilt_deg=25), boxes)
+        self.obstacles = [b for b in boxes if b.attributes.get("role") == "obstacle"]
+        self.goal = np.array([*PAN.center_xy, 0.25])
+        self.max_steps, self.body_radius, self.success_radius = max_steps, body_radius, success_radius
+        self.resets: list[int] = []
+
+    def _clearance(self) -> float:
+        gaps = []
+        for box in self.obstacles:
+            d = np.maximum(np.abs(self.position[:2] - np.array(box.center_xy)) - np.array(box.size[:2]) / 2, 0)
+            gaps.append(float(np.linalg.norm(d)) - self.body_radius)
+        return min(gaps) if gaps else math.inf
+
+    def _obs(self):
+        state = np.concatenate([self.position, ROT6D, [0.04, 1.0]]).astype(np.float32)
+        return {"frame": self.frame_, "state": state}
+
+    def _info(self):
+        clearance = self._clearance()
+        contacts = [{"obstacle": "obstacle_0"}] if clearance < 0 else []
+        success = bool(np.linalg.norm(self.position - self.goal) < self.success_radius)
+        return {"success": success, "obstacle_contacts": contacts, "min_obstacle_clearance": clearance}
+
+    def reset(self, *, seed=None, options=None):
+        self.resets.append(seed)
+        self.position, self.steps = START.copy(), 0
+        return self._obs(), self._info()
+
+    def step(self, action):
+        assert np.asarray(action).shape == (10,)
+        self.position = np.asarray(action[:3], dtype=np.float64)
+        self.steps += 1
+        info = self._info()
+        return self._obs(), float(info["success"]), info["success"], self.steps >= self.max_steps, info
+
+
+class FakePolicy:
+    """Straight line from the current EE position to the pan centroid, STEP metres per waypoint.
+
+    With guidance it runs gradient descent on the given position cost over the waypoints (a stand-in for
+    the guided sampler), so the wiring of obstacles into `position_cost` is what decides collisions.
+    """
+
+    STEP = 0.05
+
+    def __init__(self, obs_type: str = "objects", n_action_steps: int = 8):
+        kwargs = {"object_names": ("bowl", "pan")} if obs_type == "objects" else {}
+        self.config = PolicyConfig(obs_type=obs_type, n_obs_steps=2, horizon=16, n_action_steps=n_action_steps,
+                                   **kwargs)
+        self.calls: list[dict] = []
+
+    def predict_action_chunk(self, obs, *, guidance=None, position_cost=None, scheduler=None,
+                             num_inference_steps=None, generator=None):
+        self.calls.append({"obs": obs, "guidance": guidance, "cost": position_cost, "scheduler": scheduler,
+                           "steps": num_inference_steps})
+        state = torch.as_tensor(obs["state"])[0, -1]
+        if self.config.obs_type == "objects":
+            goal_xy = torch.as_tensor(obs["object_clouds"])[0, -1, 1].mean(0)[:2]
+        else:
+            goal_xy = torch.tensor(PAN.center_xy)
+        start = state[:3].double()
+        goal = torch.cat([goal_xy.double(), start[2:3]])
+        distance = torch.linalg.norm(goal - start)
+        horizon = self.config.horizon
+        # waypoint i of the horizon; index To-1 is "now", so the first executed waypoint is one STEP away
+        s = torch.clamp((torch.arange(horizon, dtype=torch.float64) - (self.config.n_obs_steps - 2)) * self.STEP
+                        / torch.clamp(distance, min=1e-9), 0, 1)
+        positions = (start + s[:, None] * (goal - start))[None]
+        if guidance is not None and position_cost is not None:
+            positions = positions.clone().requires_grad_(True)
+            for _ in range(200):
+                cost = position_cost(positions).sum()
+                if not cost.requires_grad or cost.item() == 0:
+                    break
+                (grad,) = torch.autograd.grad(cost, positions)
+                positions = (positions - 0.2 * guidance.scale * grad).detach().requires_grad_(True)
+            positions = positions.detach()
+        trajectory = torch.cat([positions.float(), torch.as_tensor(ROT6D).expand(1, horizon, 6),
+                                torch.ones(1, horizon, 1)], -1)
+        start_index = self.config.n_obs_steps - 1
+        return ActionChunk(trajectory[:, start_index:start_index + self.config.n_action_steps], trajectory)
+
+
+@pytest.fixture
+def observer():
+    return ObjectObserver(SimOracleSegmenter(), n_points=64, min_points=5)
+
+
+def test_window_repeats_the_first_observation_until_full_then_slides(observer):
+    env = FakeEnv([BOWL, PAN])
+    runner = PolicyRunner(FakePolicy(), observer)
+    obs, _ = env.reset(seed=0)
+    frame, state = observe(env, obs)
+    runner.push(frame, state)
+    window = runner.policy_obs()
+    assert window["object_clouds"].shape == (1, 2, 2, 64, 3)
+    assert window["state"].shape == (1, 2, 11)
+    np.testing.assert_array_equal(window["state"][0, 0], window["state"][0, 1])
+    for x in (0.1, 0.2):
+        runner.push(frame, np.concatenate([[x, 0, 0.25], ROT6D, [0.04, 1.0]]).astype(np.float32))
+    np.testing.assert_allclose(runner.policy_obs()["state"][0, :, 0], [0.1, 0.2])
+    # slot order is the policy's: slot 1 is the pan, whose cloud is centred on the pan
+    np.testing.assert_allclose(window["object_clouds"][0, -1, 1].mean(0)[:2], PAN.center_xy, atol=0.02)
+
+
+def test_one_chunk_is_executed_for_n_action_steps_before_replanning(observer):
+    env = FakeEnv([BOWL, PAN], max_steps=20, success_radius=-1.0)  # never succeeds: runs to the limit
+    policy = FakePolicy(n_action_steps=8)
+    runner = PolicyRunner(policy, observer)
+    result = rollout(env, runner, seed=3, stop_on_success=False)
+    assert result.steps == 20
+    assert len(policy.calls) == 3  # steps 0, 8, 16
+    assert [c.step for c in runner.chunks] == [0, 8, 16]
+    assert len(result.chunk_latency_s) == 3 and all(t > 0 for t in result.chunk_latency_s)
+    assert env.resets == [3]
+
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=4))
+    assert len(rollout(env, runner, seed=3, stop_on_success=False).chunk_latency_s) == 5
+
+
+def test_unobstructed_episode_succeeds_and_measures_the_path(observer):
+    env = FakeEnv([BOWL, PAN])
+    result = rollout(env, PolicyRunner(FakePolicy(), observer), seed=0)
+    assert result.success
+    assert not result.collided and result.min_clearance is None  # no obstacle in the scene
+    # straight line bowl -> pan centroid (the top-view cloud's centroid is the pan centre within 1 cm)
+    assert result.path_length == pytest.approx(0.55, abs=0.02)
+    assert result.ee_path.shape == (result.steps + 1, 3)
+    # 5 cm per step, success within 3 cm of the goal: the episode stops at the first step that gets there
+    assert result.steps == math.ceil((0.55 - 0.03) / FakePolicy.STEP)
+
+
+def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(observer):
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    obs, _ = env.reset(seed=0)
+    frame, state = observe(env, obs)
+    assert scene_obstacles(frame) == ["obstacle_0"]
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(margin=0.02)),
+                          obstacle_phrases=["obstacle_0"])
+    runner.push(frame, state)
+    (cylinder,) = list(runner.obstacle_cost)
+    assert isinstance(cylinder, Cylinder) and cylinder.xy_only
+    # a 6 cm square post seen at 64x64 from one side: the covering circle sits within ~1.5 cm of its axis
+    # and covers every seen point (radius >= half the side, at most a bit over half the diagonal + offset)
+    np.testing.assert_allclose(cylinder.center.numpy(), OBSTACLE.center_xy, atol=0.015)
+    assert 0.03 <= cylinder.radius <= 0.06
+    # held extent = the bowl's diameter (paper): its covering radius is ~5-7 cm, so ~10-14 cm
+    assert 0.09 <= runner.held_radius <= 0.15
+    assert cylinder.safety_distance == pytest.approx(cylinder.radius + runner.held_radius + 0.02)
+
+    fixed = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(held_radius=0.05)),
+                         obstacle_phrases=["obstacle_0"])
+    fixed.push(frame, state)
+    assert fixed.held_radius == 0.05
+
+
+def test_guidance_reaches_the_policy_only_with_obstacles_and_bends_the_path_clear(observer):
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    guidance = GuidanceConfig(mode="clean", scale=1.0, last_steps=10)
+    model = ObstacleModel(held_radius=0.03, margin=0.02)
+
+    plain_policy = FakePolicy()
+    plain = rollout(env, PolicyRunner(plain_policy, observer, RuntimeConfig(obstacle=model),
+                                      obstacle_phrases=["obstacle_0"]), seed=0)
+    assert all(call["guidance"] is None and call["cost"] is None for call in plain_policy.calls)
+    assert plain.collided and plain.n_collision_steps >= 1 and plain.min_clearance < 0
+
+    guided_policy = FakePolicy()
+    config = RuntimeConfig(guidance=guidance, obstacle=model, scheduler="ddim", num_inference_steps=10)
+    guided = rollout(env, PolicyRunner(guided_policy, observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
+    assert all(call["guidance"] is guidance and call["cost"] is not None for call in guided_policy.calls)
+    assert guided_policy.calls[0]["scheduler"] == "ddim" and guided_policy.calls[0]["steps"] == 10
+    assert not guided.collided and guided.min_clearance > 0
+    assert guided.path_length > plain.path_length  # the detour
+    assert all(c is not None and c >= 0 for c in guided.chunk_predicted_clearance)
+
+    # guidance without obstacles is a no-op: nothing to push against
+    free_policy = FakePolicy()
+    rollout(FakeEnv([BOWL, PAN]), PolicyRunner(free_policy, observer, config), seed=0)
+    assert all(call["guidance"] is None for call in free_policy.calls)
+
+
+def test_checked_execution_resamples_with_guidance_until_the_chunk_is_clear(observer):
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    policy = FakePolicy()
+    config = RuntimeConfig(obstacle=ObstacleModel(held_radius=0.03), checked=CheckConfig(initial_scale=1.0))
+    result = rollout(env, PolicyRunner(policy, observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
+    assert not result.collided
+    assert max(result.chunk_tries) >= 2  # the straight line hit the obstacle at least once
+    assert policy.calls[0]["guidance"] is None  # first try unguided, then escalated
+    assert any(call["guidance"] is not None for call in policy.calls)
+
+
+def test_checked_execution_can_stop_an_episode_that_cannot_be_cleared(observer):
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    config = RuntimeConfig(obstacle=ObstacleModel(held_radius=0.03), on_unclear="stop",
+                           checked=CheckConfig(initial_scale=1e-6, max_tries=2, growth=1.0))
+    result = rollout(env, PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
+    assert not result.success
+    assert result.error.startswith("ClosedLoopError: no collision-free chunk")
+
+
+def test_a_missing_target_ends_the_episode_with_a_named_error(observer):
+    env = FakeEnv([PAN])  # no bowl
+    result = rollout(env, PolicyRunner(FakePolicy(), observer), seed=0)
+    assert result.steps == 0 and not result.success
+    assert "ObjectNotFoundError" in result.error and "'bowl'" in result.error
+
+
+def test_runner_checks_its_inputs(observer):
+    with pytest.raises(ValueError, match="2 object slots"):
+        PolicyRunner(FakePolicy(), observer, target_phrases=["bowl"])
+    with pytest.raises(ValueError, match="needs an observer"):
+        PolicyRunner(FakePolicy(), None)
+    with pytest.raises(ValueError, match="exceeds what one chunk holds"):
+        PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=16))
+    with pytest.raises(ValueError, match="obstacle shape"):
+        ObstacleModel(shape="cone")
+    with pytest.raises(ValueError, match="first"):
+        PolicyRunner(FakePolicy(), observer).policy_obs()
+    assert issubclass(ClosedLoopError, Lano3dpError)  # rollout turns it into a failed episode, not a crash
+
+
+def test_image_and_scene_policies_get_their_own_inputs(observer):
+    env = FakeEnv([BOWL, PAN])
+    obs, _ = env.reset(seed=0)
+    frame, state = observe(env, obs)
+    image_runner = PolicyRunner(FakePolicy("image"), None)
+    image_runner.push(frame, state)
+    window = image_runner.policy_obs()
+    assert window["rgb"].shape == (1, 2, 96, 96, 3) and window["rgb"].dtype == np.uint8
+    scene_runner = PolicyRunner(FakePolicy("scene"), observer)
+    scene_runner.push(frame, state)
+    cloud = scene_runner.policy_obs()["scene_cloud"]
+    assert cloud.shape == (1, 2, 512, 3)
+    assert (cloud[..., 2] > 0).all()  # the table is removed
+
+
+def test_resize_rgb_averages_areas():
+    image = np.zeros((64, 64, 3), np.uint8)
+    image[:, 32:] = 200
+    small = resize_rgb(image, 8)
+    assert small.shape == (8, 8, 3)
+    assert small[0, 0, 0] == 0 and small[0, -1, 0] == 200
+    np.testing.assert_array_equal(resize_rgb(small, 8), small)  # already the right size: unchanged
+
+
+def test_path_length():
+    assert path_length(np.array([[0, 0, 0], [0.3, 0.4, 0], [0.3, 0.4, 1.0]])) == pytest.approx(1.5)
+    assert path_length(np.zeros((1, 3))) == 0.0
+
+
+def test_observe_builds_a_frame_from_raw_arrays_when_the_env_has_none():
+    frame = render_boxes(top_down_camera(size=32), [BOWL])
+    raw = {"depth": frame.depth, "rgb": frame.rgb, "intrinsics": frame.camera.K,
+           "cam_to_world": frame.camera.cam_to_world, "state": np.zeros(11)}
+    built, state = observe(SimpleNamespace(), raw)
+    np.testing.assert_array_equal(built.depth, frame.depth)
+    assert state.dtype == np.float32
+    with pytest.raises(ValueError, match="11"):
+        observe(SimpleNamespace(), {**raw, "state": np.zeros(10)})

@@ -204,3 +204,21 @@ def test_fitting_too_few_points_raises_empty_cloud_error(fit):
         fit(np.zeros((3, 3)))
     with pytest.raises(EmptyCloudError):
         fit(np.full((50, 3), np.nan))
+
+
+def test_metric_gradient_makes_the_push_isotropic_in_metres():
+    """With a = s * x (s = 25/m in x, 4/m in y), descending the cost in normalised units moves a waypoint
+    by the metric gradient times 1/s^2 per axis; MetricGradient rescales it to exactly the metric gradient."""
+    from lano3dp.guidance.costs import MetricGradient
+
+    scale = torch.tensor([25.0, 4.0, 10.0], dtype=torch.float64)
+    cylinder = Cylinder((0.0, 0.0), 0.05, margin=0.05)
+    normalised = (pts((0.03, -0.04, 0.1)) * scale).requires_grad_(True)
+    for cost, expected in ((cylinder, torch.tensor([-0.6 / 625, 0.8 / 16, 0.0])),
+                           (MetricGradient(cylinder, scale), torch.tensor([-0.6, 0.8, 0.0]))):
+        (gradient,) = torch.autograd.grad(cost(normalised / scale).sum(), normalised)
+        metric_push = gradient[0, 0] / scale  # how far (m) a unit step in normalised units moves the waypoint
+        np.testing.assert_allclose(metric_push, expected.double(), atol=1e-9)
+    wrapped = MetricGradient.from_stats(cylinder, [-0.04, -0.25, 0.0, 9.0], [0.04, 0.25, 0.2, 9.0])
+    np.testing.assert_allclose(wrapped.weight, [25.0**2, 4.0**2, 10.0**2])
+    assert wrapped.clearance(pts((0.1, 0.0, 0.0))).item() == pytest.approx(0.05)

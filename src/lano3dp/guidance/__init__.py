@@ -4,6 +4,7 @@ from lano3dp.guidance.checked import CheckConfig, CheckedResult, checked_sample
 from lano3dp.guidance.costs import (
     Cylinder,
     Densified,
+    MetricGradient,
     Obstacle,
     ObstacleSet,
     OrientedBox,
@@ -19,6 +20,6 @@ from lano3dp.guidance.sampler import DenoiseStep, GuidanceConfig, GuidanceMode, 
 
 __all__ = [
     "CheckConfig", "CheckedResult", "CollisionError", "Cylinder", "DenoiseStep", "Densified", "GuidanceConfig",
-    "GuidanceError", "GuidanceMode", "Obstacle", "ObstacleSet", "OrientedBox", "PointCloudObstacle", "PositionCost",
-    "Sphere", "checked_sample", "denoise", "densify", "fit_box", "fit_cylinder", "min_clearance",
+    "GuidanceError", "GuidanceMode", "MetricGradient", "Obstacle", "ObstacleSet", "OrientedBox", "PointCloudObstacle",
+    "PositionCost", "Sphere", "checked_sample", "denoise", "densify", "fit_box", "fit_cylinder", "min_clearance",
 ]

@@ -309,6 +309,59 @@ class Densified:
         return f"Densified({self.cost!r}, factor={self.factor})"
 
 
+class _ScaleGradient(torch.autograd.Function):
+    """Identity forward; the backward multiplies the gradient by a per-axis weight."""
+
+    @staticmethod
+    def forward(ctx, positions, weight):
+        ctx.save_for_backward(weight)
+        return positions.view_as(positions)
+
+    @staticmethod
+    def backward(ctx, grad):
+        (weight,) = ctx.saved_tensors
+        return grad * weight, None
+
+
+class MetricGradient:
+    """A cost whose guidance push is isotropic in metres (beyond the paper).
+
+    Guidance differentiates with respect to the *normalised* trajectory. With Diffusion Policy's
+    per-axis min-max normaliser a = s * x + o, a push -rho * dD/da moves a waypoint by
+    -rho * s_d^-2 * dD/dx_d along axis d: demonstrations that span 8 cm in x and 55 cm in y resist a
+    sideways push (s_x = 25/m) about 50 times more than one along the path (s_y = 3.6/m), so the
+    paper's cost slides waypoints along the path instead of around the obstacle. Scaling the gradient
+    that reaches the positions by s_d^2 cancels that: each guided step then moves a waypoint by about
+    rho metres down the metric cost gradient (exactly so where d A_0|k / d A_k is the identity), so
+    rho reads in metres per guided step. The cost value and the clearance are unchanged.
+
+    Args:
+        cost: any PositionCost.
+        action_scale: (3,) the normaliser's scale s of the position dims (1/m): 2 / (max - min).
+    """
+
+    def __init__(self, cost: PositionCost, action_scale):
+        self.cost = cost
+        self.weight = torch.as_tensor(np.asarray(action_scale, dtype=np.float64)) ** 2
+        if self.weight.shape != (3,) or not bool((self.weight > 0).all()):
+            raise ValueError(f"action_scale must be 3 positive numbers, got {action_scale!r}")
+
+    @classmethod
+    def from_stats(cls, cost: PositionCost, action_min, action_max) -> MetricGradient:
+        """From the normaliser's action min/max (any length >= 3; the first 3 are the position)."""
+        span = np.asarray(action_max, dtype=np.float64)[:3] - np.asarray(action_min, dtype=np.float64)[:3]
+        return cls(cost, 2.0 / np.maximum(span, 1e-4))
+
+    def clearance(self, positions):
+        return self.cost.clearance(positions)
+
+    def __call__(self, positions):
+        return self.cost(_ScaleGradient.apply(positions, self.weight.to(positions)))
+
+    def __repr__(self):
+        return f"MetricGradient({self.cost!r}, weight={self.weight.tolist()})"
+
+
 def min_clearance(cost: PositionCost, positions: torch.Tensor) -> torch.Tensor:
     """(B, T, 3) -> (B,) the smallest clearance (m) along each trajectory, without gradients."""
     with torch.no_grad():

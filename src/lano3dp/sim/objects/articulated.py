@@ -1,0 +1,391 @@
+"""Articulated and composite objects: drawer cabinet, hinged-door box (microwave), phone and
+phone base.
+
+Builders follow the `primitives` signature
+
+    add_<kind>(builder, name, position, yaw=0.0, color=..., scale=1.0, role="target") -> ObjectInfo
+
+and the naming rule of `lano3dp.sim.objects`: every body of object `name` is `name/<part>`.
+The joints, sites and dimensions a task needs are fixed by the object's name and scale, so a
+task recovers them after compiling with `DrawerParts.of(name, scale)` (and the like) instead of
+carrying builder state around. Sites sit in `SITE_GROUP` (the renderer hides them); experts and
+success checks read them, observations never do.
+
+Static parts have no joint (welded to the world); a drawer slides on one slide joint, a door
+turns on one hinge. Geom masses are given explicitly and the compiler infers inertia, which
+avoids MjSpec's NaN `ipos` pitfall with explicit inertials.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import mujoco
+import numpy as np
+
+from lano3dp.sim.objects import ObjectInfo, rgba, size_word
+
+if TYPE_CHECKING:
+    from lano3dp.sim.scene import SceneBuilder
+
+SITE_GROUP = 5
+BOX = mujoco.mjtGeom.mjGEOM_BOX
+CAPSULE = mujoco.mjtGeom.mjGEOM_CAPSULE
+
+
+def yaw_quat(yaw: float) -> list[float]:
+    return [float(np.cos(yaw / 2)), 0.0, 0.0, float(np.sin(yaw / 2))]
+
+
+def _box(body, name: str, center, half, color, mass: float = 0.0, **kw):
+    if mass > 0:
+        kw["mass"] = mass
+    return body.add_geom(name=name, type=BOX, pos=[float(c) for c in center], size=[float(h) for h in half],
+                         rgba=list(color), **kw)
+
+
+def _site(body, name: str, pos) -> None:
+    body.add_site(name=name, pos=[float(p) for p in pos], size=[0.005, 0, 0], group=SITE_GROUP)
+
+
+def _shade(color, factor: float) -> list[float]:
+    return [min(1.0, c * factor) for c in color[:3]] + [color[3]]
+
+
+# ------------------------------------------------------------------------------------------- drawer
+
+DRAWER_DEPTH, DRAWER_WIDTH, DRAWER_HEIGHT = 0.16, 0.22, 0.10
+DRAWER_WALL, DRAWER_TRAVEL = 0.008, 0.14
+HANDLE_STANDOFF, HANDLE_LENGTH, HANDLE_RADIUS = 0.05, 0.10, 0.006
+_GAP = 0.002  # clearance between sliding or hinged parts and their carcass
+
+
+@dataclass(frozen=True)
+class DrawerParts:
+    """Element names and dimensions of a drawer cabinet built by `add_drawer` (metres).
+
+    Cabinet frame: origin on the table under the cabinet's centre, +x = the direction the drawer
+    opens, z up. The footprint and height scale with `scale`; wall, handle and standoff do not,
+    so the gripper fits every instance. The drawer's opening (m) is the slide joint's qpos.
+    """
+
+    name: str
+    depth: float
+    width: float
+    height: float
+    travel: float
+    wall: float = DRAWER_WALL
+
+    @classmethod
+    def of(cls, name: str, scale: float = 1.0) -> DrawerParts:
+        return cls(name, DRAWER_DEPTH * scale, DRAWER_WIDTH * scale, DRAWER_HEIGHT * scale, DRAWER_TRAVEL * scale)
+
+    @property
+    def cabinet(self) -> str:
+        return f"{self.name}/cabinet"
+
+    @property
+    def drawer(self) -> str:
+        return f"{self.name}/drawer"
+
+    @property
+    def joint(self) -> str:
+        return f"{self.name}/slide"
+
+    @property
+    def handle_site(self) -> str:
+        """On the handle bar's axis, at its middle."""
+        return f"{self.name}/handle"
+
+    @property
+    def interior_site(self) -> str:
+        """Centre of the drawer floor's top surface (moves with the drawer)."""
+        return f"{self.name}/interior"
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.cabinet, self.drawer)
+
+    # Derived geometry in the cabinet frame at opening 0.
+    @property
+    def floor_top(self) -> float:
+        return 2 * self.wall + _GAP
+
+    @property
+    def inner_x(self) -> tuple[float, float]:
+        """(back, front) x of the drawer's inner floor."""
+        return -self.depth / 2 + 2 * self.wall + _GAP, self.depth / 2
+
+    @property
+    def inner_half_width(self) -> float:
+        return self.width / 2 - 2 * self.wall - _GAP
+
+    @property
+    def side_wall_top(self) -> float:
+        return self.floor_top + 0.6 * (self.height - 2 * self.wall - 2 * _GAP)
+
+    @property
+    def handle_x(self) -> float:
+        return self.depth / 2 + _GAP + self.wall + HANDLE_STANDOFF
+
+    @property
+    def handle_z(self) -> float:
+        # A fixed distance below the top, so a hand grasping the bar clears the cabinet at any scale.
+        return self.height - 0.04
+
+    @property
+    def interior_half(self) -> tuple[float, float]:
+        """Half extents (x, y) of the drawer's inner floor."""
+        back, front = self.inner_x
+        return (front - back) / 2, self.inner_half_width
+
+
+def add_drawer(builder: SceneBuilder, name: str, position, yaw: float = 0.0, color: str = "brown",
+               scale: float = 1.0, role: str = "target", handle_color: str = "grey",
+               opening: float = 0.0) -> ObjectInfo:
+    """A static cabinet open at its +x face, one drawer on a slide joint, and a bar handle.
+
+    The drawer starts `opening` metres out: the drawer body is built there and the joint's
+    reference is set to match, so the model's initial qpos (`qpos0`, what a reset restores) is
+    the opening and qpos keeps meaning "metres out" (0 = closed). Cabinet-drawer contacts are
+    filtered by MuJoCo's parent-child rule, so the drawer slides freely inside its
+    carcass; damping and friction loss keep it where the gripper leaves it.
+    """
+    p = DrawerParts.of(name, scale)
+    d, w, h, t = p.depth, p.width, p.height, p.wall
+    colour, handle_colour = rgba(color), rgba(handle_color)
+    cab = builder.world.add_body(name=p.cabinet, pos=[float(position[0]), float(position[1]), 0.0],
+                                 quat=yaw_quat(yaw))
+    _box(cab, f"{name}/bottom", [0, 0, t / 2], [d / 2, w / 2, t / 2], colour)
+    _box(cab, f"{name}/top", [0, 0, h - t / 2], [d / 2, w / 2, t / 2], colour)
+    for side, sy in (("left", 1), ("right", -1)):
+        _box(cab, f"{name}/{side}", [0, sy * (w / 2 - t / 2), h / 2], [d / 2, t / 2, h / 2 - t], colour)
+    _box(cab, f"{name}/back", [-d / 2 + t / 2, 0, h / 2], [t / 2, w / 2 - t, h / 2 - t], colour)
+
+    opening = float(np.clip(opening, 0.0, p.travel))
+    drawer = cab.add_body(name=p.drawer, pos=[opening, 0, 0])
+    drawer.add_joint(name=p.joint, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[1, 0, 0], range=[0.0, p.travel],
+                     ref=opening, damping=3.0, frictionloss=0.3, armature=0.05)
+    inner = _shade(colour, 1.2)
+    back, front = p.inner_x
+    x_back = back - t  # outer face of the drawer's back wall
+    y_half = p.inner_half_width + t
+    wall_half = (p.side_wall_top - p.floor_top) / 2
+    wall_z = p.floor_top + wall_half
+    _box(drawer, f"{name}/floor", [(x_back + front) / 2, 0, p.floor_top - t / 2], [(front - x_back) / 2, y_half, t / 2],
+         inner, mass=0.15)
+    for side, sy in (("dleft", 1), ("dright", -1)):
+        _box(drawer, f"{name}/{side}", [(x_back + front) / 2, sy * (y_half - t / 2), wall_z],
+             [(front - x_back) / 2, t / 2, wall_half], inner, mass=0.05)
+    _box(drawer, f"{name}/dback", [back - t / 2, 0, wall_z], [t / 2, y_half - t, wall_half], inner, mass=0.03)
+    # The front panel covers the whole cabinet face, just outside it.
+    _box(drawer, f"{name}/front", [d / 2 + _GAP + t / 2, 0, h / 2], [t / 2, w / 2, h / 2 - _GAP], inner, mass=0.1)
+    x0, x1, zh, half_len = d / 2 + _GAP + t, p.handle_x, p.handle_z, HANDLE_LENGTH / 2
+    drawer.add_geom(name=f"{name}/handle_bar", type=CAPSULE, size=[HANDLE_RADIUS, 0, 0], rgba=handle_colour,
+                    fromto=[x1, -half_len, zh, x1, half_len, zh], mass=0.02, friction=[1.5, 0.02, 0.0005])
+    for i, sy in enumerate((-1, 1)):
+        drawer.add_geom(name=f"{name}/handle_stem{i}", type=CAPSULE, size=[HANDLE_RADIUS, 0, 0], rgba=handle_colour,
+                        fromto=[x0, sy * half_len, zh, x1, sy * half_len, zh], mass=0.01)
+    _site(drawer, p.handle_site, [x1, 0, zh])
+    _site(drawer, p.interior_site, [(back + front) / 2, 0, p.floor_top])
+
+    reach = d / 2 + p.travel + t + HANDLE_STANDOFF + HANDLE_RADIUS
+    info = ObjectInfo(name, "drawer", color, size_word(scale), p.bodies, float(np.hypot(reach, w / 2)),
+                      np.array(cab.pos), role, np.array([reach, w / 2, h]))
+    return builder.register(info)
+
+
+# ---------------------------------------------------------------------------------------- microwave
+
+MICROWAVE_DEPTH, MICROWAVE_WIDTH, MICROWAVE_HEIGHT = 0.18, 0.26, 0.15
+DOOR_THICKNESS, DOOR_MAX_ANGLE = 0.012, 2.0
+
+
+@dataclass(frozen=True)
+class MicrowaveParts:
+    """Element names and dimensions of a box with a hinged door built by `add_microwave` (metres).
+
+    Box frame: origin on the table under the box's centre, the door on the +x face, hinged on
+    its vertical edge at -y. At door angle q (the hinge's qpos, 0 = closed) the door's free edge
+    points along (sin q, cos q, 0) from the hinge, and the door's outer face normal is
+    (cos q, -sin q, 0), both in the box frame.
+    """
+
+    name: str
+    depth: float
+    width: float
+    height: float
+    wall: float = DRAWER_WALL
+    door_thickness: float = DOOR_THICKNESS
+
+    @classmethod
+    def of(cls, name: str, scale: float = 1.0) -> MicrowaveParts:
+        return cls(name, MICROWAVE_DEPTH * scale, MICROWAVE_WIDTH * scale, MICROWAVE_HEIGHT * scale)
+
+    @property
+    def body(self) -> str:
+        return f"{self.name}/body"
+
+    @property
+    def door(self) -> str:
+        return f"{self.name}/door"
+
+    @property
+    def joint(self) -> str:
+        return f"{self.name}/hinge"
+
+    @property
+    def hinge_site(self) -> str:
+        """On the hinge axis at table height (static)."""
+        return f"{self.name}/hinge_axis"
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.body, self.door)
+
+    @property
+    def hinge_local(self) -> np.ndarray:
+        """(3,) hinge axis point at z = 0 in the box frame."""
+        return np.array([self.depth / 2 + _GAP + self.door_thickness / 2, -self.width / 2, 0.0])
+
+    @property
+    def door_width(self) -> float:
+        return self.width - _GAP
+
+
+def add_microwave(builder: SceneBuilder, name: str, position, yaw: float = 0.0, color: str = "white",
+                  scale: float = 1.0, role: str = "target", door_color: str = "black",
+                  door_angle: float = 0.0) -> ObjectInfo:
+    """A static box open at its +x face, closed by a door on a vertical hinge at the front-left edge.
+
+    The door starts `door_angle` rad open (built rotated, with the joint reference matching, so
+    the initial qpos is the angle; see `add_drawer`). A handle block sits on the door's outer
+    face near the free edge.
+    """
+    p = MicrowaveParts.of(name, scale)
+    d, w, h, t, dt = p.depth, p.width, p.height, p.wall, p.door_thickness
+    colour, door_colour = rgba(color), rgba(door_color)
+    box = builder.world.add_body(name=p.body, pos=[float(position[0]), float(position[1]), 0.0], quat=yaw_quat(yaw))
+    _box(box, f"{name}/bottom", [0, 0, t / 2], [d / 2, w / 2, t / 2], colour)
+    _box(box, f"{name}/top", [0, 0, h - t / 2], [d / 2, w / 2, t / 2], colour)
+    for side, sy in (("left", 1), ("right", -1)):
+        _box(box, f"{name}/{side}", [0, sy * (w / 2 - t / 2), h / 2], [d / 2, t / 2, h / 2 - t], colour)
+    _box(box, f"{name}/back", [-d / 2 + t / 2, 0, h / 2], [t / 2, w / 2 - t, h / 2 - t], colour)
+    hinge = p.hinge_local
+    angle = float(np.clip(door_angle, 0.0, DOOR_MAX_ANGLE))
+    door = box.add_body(name=p.door, pos=list(hinge), quat=yaw_quat(-angle))
+    # Axis -z so that a positive angle swings the free edge outward (+x). MjSpec reads hinge
+    # ranges and refs in the compiler's angle unit (degrees by default).
+    unit = np.degrees if builder.spec.compiler.degree else float
+    door.add_joint(name=p.joint, type=mujoco.mjtJoint.mjJNT_HINGE, axis=[0, 0, -1],
+                   range=[0.0, float(unit(DOOR_MAX_ANGLE))], ref=float(unit(angle)),
+                   damping=0.05, frictionloss=0.01, armature=0.005)
+    _box(door, f"{name}/panel", [0, p.door_width / 2, h / 2], [dt / 2, p.door_width / 2, h / 2 - _GAP], door_colour,
+         mass=0.2)
+    _box(door, f"{name}/door_handle", [dt / 2 + 0.008, p.door_width - 0.03, h / 2], [0.008, 0.008, 0.3 * h], colour,
+         mass=0.02)
+    _site(box, p.hinge_site, hinge)
+    reach = d / 2 + w  # an open door sweeps a quarter disc of radius w in front of the box
+    info = ObjectInfo(name, "microwave", color, size_word(scale), p.bodies, float(np.hypot(reach, w / 2)),
+                      np.array(box.pos), role, np.array([reach, w / 2 + 0.02, h]))
+    return builder.register(info)
+
+
+# --------------------------------------------------------------------------------- phone and base
+
+PHONE_LENGTH, PHONE_WIDTH, PHONE_THICKNESS = 0.13, 0.06, 0.016
+BASE_CLEARANCE, BASE_PLATE, BASE_RIM_HEIGHT, BASE_RIM = 0.025, 0.008, 0.012, 0.012
+
+
+@dataclass(frozen=True)
+class PhoneParts:
+    """A phone-like slab lying flat: length along its local x, width (the grasp axis) along y."""
+
+    name: str
+    length: float
+    width: float
+    thickness: float = PHONE_THICKNESS
+
+    @classmethod
+    def of(cls, name: str, scale: float = 1.0) -> PhoneParts:
+        return cls(name, PHONE_LENGTH * scale, PHONE_WIDTH * scale)
+
+    @property
+    def body(self) -> str:
+        return f"{self.name}/body"
+
+    @property
+    def joint(self) -> str:
+        return f"{self.name}/free"
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.body,)
+
+
+def add_phone(builder: SceneBuilder, name: str, position, yaw: float = 0.0, color: str = "black",
+              scale: float = 1.0, role: str = "target") -> ObjectInfo:
+    """A free phone slab (90 g) with a screen inlay on top; origin at its centre."""
+    p = PhoneParts.of(name, scale)
+    half = [p.length / 2, p.width / 2, p.thickness / 2]
+    body = builder.world.add_body(name=p.body, pos=[float(position[0]), float(position[1]), half[2] + 0.0005],
+                                  quat=yaw_quat(yaw))
+    body.add_freejoint(name=p.joint)
+    _box(body, f"{name}/slab", [0, 0, 0], half, rgba(color), mass=0.09, friction=[1.2, 0.02, 0.0005], condim=4)
+    _box(body, f"{name}/screen", [0, 0, half[2] + 0.0005], [half[0] * 0.9, half[1] * 0.85, 0.0005],
+         [0.2, 0.35, 0.55, 1.0], contype=0, conaffinity=0, mass=0.001)
+    info = ObjectInfo(name, "phone", color, size_word(scale), p.bodies, float(np.hypot(*half[:2])) + 0.005,
+                      np.array(body.pos), role, np.array(half))
+    return builder.register(info)
+
+
+@dataclass(frozen=True)
+class PhoneBaseParts:
+    """A flat base with a raised rim around a recess that fits a phone of the same scale."""
+
+    name: str
+    inner_length: float
+    inner_width: float
+    plate: float = BASE_PLATE
+    rim_height: float = BASE_RIM_HEIGHT
+    rim: float = BASE_RIM
+
+    @classmethod
+    def of(cls, name: str, scale: float = 1.0) -> PhoneBaseParts:
+        return cls(name, PHONE_LENGTH * scale + 2 * BASE_CLEARANCE, PHONE_WIDTH * scale + 2 * BASE_CLEARANCE)
+
+    @property
+    def body(self) -> str:
+        return f"{self.name}/body"
+
+    @property
+    def top_site(self) -> str:
+        """Centre of the recess floor."""
+        return f"{self.name}/top"
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.body,)
+
+
+def add_phone_base(builder: SceneBuilder, name: str, position, yaw: float = 0.0, color: str = "grey",
+                   scale: float = 1.0, role: str = "target") -> ObjectInfo:
+    """A static phone base: a plate with a low rim around a recess the phone lies in.
+
+    RLBench's base holds the phone upright in a slot; here the phone lies flat in the recess,
+    which keeps the same pick, carry and aligned placement without an in-hand regrasp.
+    """
+    p = PhoneBaseParts.of(name, scale)
+    L, W, t, rh, r = p.inner_length, p.inner_width, p.plate, p.rim_height, p.rim
+    colour = rgba(color)
+    body = builder.world.add_body(name=p.body, pos=[float(position[0]), float(position[1]), 0.0], quat=yaw_quat(yaw))
+    _box(body, f"{name}/plate", [0, 0, t / 2], [L / 2 + r, W / 2 + r, t / 2], colour)
+    for i, s in enumerate((-1, 1)):
+        _box(body, f"{name}/rim_end{i}", [s * (L / 2 + r / 2), 0, t + rh / 2], [r / 2, W / 2 + r, rh / 2], colour)
+        _box(body, f"{name}/rim_side{i}", [0, s * (W / 2 + r / 2), t + rh / 2], [L / 2, r / 2, rh / 2], colour)
+    _site(body, p.top_site, [0, 0, t])
+    half = np.array([L / 2 + r, W / 2 + r, t + rh])
+    info = ObjectInfo(name, "base", color, size_word(scale), p.bodies, float(np.hypot(*half[:2])),
+                      np.array(body.pos), role, half)
+    return builder.register(info)

@@ -1,0 +1,140 @@
+"""open_drawer: pull a drawer open by its handle (RLBench `open_drawer`).
+
+Layout: a one-drawer cabinet (`objects.articulated.add_drawer`) with its centre at x in
+[0.36, 0.46], |y| in [0.04, 0.18] (either side), its front turned towards the camera (+x)
+by a yaw in [-0.5, 0.5] rad; the drawer starts closed or up to 2 cm ajar. Instance
+variation: scale 0.8 / 1.2 and another colour.
+
+Expert: turn the fingers' closing axis along the pull direction, descend onto the handle bar
+with the gripper open (centred 1.2 cm outward of the bar so the inner finger clears the
+drawer front), close, pull straight out to 95% of the travel, release and lift.
+
+Success: the drawer is out by at least 60% of its travel (8.4 cm at scale 1).
+
+Differences from RLBench: one drawer instead of three (RLBench picks the bottom, middle or
+top one by the instruction), and a free-floating gripper instead of an arm.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lano3dp.sim.experts import CLOSED, MotionPlan
+from lano3dp.sim.objects.articulated import DrawerParts, add_drawer
+from lano3dp.sim.robot import HOME_POSITION, rot_z, top_down
+from lano3dp.sim.tasks import register_task
+from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.variations import Variation
+
+OPEN_FRACTION = 0.6  # success threshold, fraction of the drawer's travel
+DRAWER_COLORS = ("white", "blue", "green", "grey")
+HANDLE_OFFSET = 0.012  # grasp centre outward of the bar: the inner finger then clears the drawer front
+CLEARANCE_KEY = "drawer_clearance"  # layout entry that only reserves the pulled-out drawer's footprint
+
+
+def sample_drawer(rng: np.random.Generator, variation: Variation, opening: tuple[float, float],
+                  x_range=(0.36, 0.46), y_range=(0.04, 0.18)) -> dict[str, Placement]:
+    """Cabinet placement plus a clearance disc over the swept drawer, as layout entries.
+
+    `opening` is the (low, high) range of the initial opening as a fraction of the travel.
+    """
+    scale = Task.instance_scale(rng, variation)
+    color = str(rng.choice(DRAWER_COLORS)) if variation.has("instance") else "brown"
+    side = rng.choice([-1.0, 1.0])
+    xy = np.array([rng.uniform(*x_range), side * rng.uniform(*y_range)])
+    yaw = float(rng.uniform(-0.5, 0.5))
+    parts = DrawerParts.of("drawer", scale)
+    start = float(rng.uniform(*opening)) * parts.travel
+    cabinet = Placement("drawer", np.array([*xy, 0.0]), yaw, color, scale,
+                        float(np.hypot(parts.depth, parts.width)) / 2 + 0.01, {"opening": start})
+    # The drawer pulled fully out, its handle and the hand around it: a disc in front of the cabinet.
+    reach = parts.handle_x + parts.travel + 0.04
+    front = xy + rot_z(yaw)[:2, 0] * (parts.depth / 2 + reach) / 2
+    clearance = Placement("clearance", np.array([*front, 0.0]), yaw, color, scale,
+                          float(np.hypot((reach - parts.depth / 2) / 2, parts.width / 2)) + 0.01)
+    return {"drawer": cabinet, CLEARANCE_KEY: clearance}
+
+
+def build_drawer(builder, layout: Layout) -> None:
+    drawer = layout.objects["drawer"]
+    add_drawer(builder, layout.names["drawer"], drawer.position, drawer.yaw, drawer.color, drawer.scale,
+               opening=drawer.params["opening"])
+
+
+def drawer_frame(layout: Layout) -> tuple[DrawerParts, np.ndarray, np.ndarray]:
+    """(parts, cabinet origin (3,), cabinet rotation (3, 3)) of the layout's drawer."""
+    drawer = layout.objects["drawer"]
+    return DrawerParts.of(layout.names["drawer"], drawer.scale), np.asarray(drawer.position, float), rot_z(drawer.yaw)
+
+
+def drawer_opening(sim: SimState | None, layout: Layout) -> float:
+    """Current opening (m): the slide joint's qpos, or the layout's initial opening without a scene."""
+    parts, _, _ = drawer_frame(layout)
+    return layout.objects["drawer"].params["opening"] if sim is None else sim.joint_qpos(parts.joint)
+
+
+def approach_clear_of(path_start: np.ndarray, goal: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
+    """(2, 3) the part of the segment path_start -> goal whose xy lies outside the disc (centre, radius).
+
+    Obstacles stand on the table, so they can only be on the part of the approach that is not
+    over the cabinet itself.
+    """
+    ts = np.linspace(0.0, 1.0, 101)
+    points = path_start + ts[:, None] * (goal - path_start)
+    outside = np.linalg.norm(points[:, :2] - centre[:2], axis=1) > radius
+    if not outside.any():
+        return points[[0, 0]]
+    first = int(np.argmax(outside))
+    last = first
+    while last + 1 < len(points) and outside[last + 1]:
+        last += 1
+    return points[[first, last]]
+
+
+@register_task
+class OpenDrawer(Task):
+    name = "open_drawer"
+    skill = "open_drawer"
+    object_slots = ("drawer",)
+    instruction = "open the {drawer}"
+    max_steps = 100
+
+    def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
+        layout = Layout(seed=0, objects=sample_drawer(rng, variation, opening=(0.0, 0.15)))
+        layout.set_names(self.object_slots, variation)
+        return layout
+
+    def build(self, builder, layout: Layout) -> None:
+        build_drawer(builder, layout)
+
+    def handle_grasp(self, sim: SimState | None, layout: Layout) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Grasp position (3,), EE rotation (3, 3) and the pull direction (3,) for the current opening."""
+        parts, origin, rotation = drawer_frame(layout)
+        pull = rotation[:, 0]
+        handle = origin + rotation @ np.array([parts.handle_x + drawer_opening(sim, layout), 0.0, parts.handle_z])
+        # Closing axis (EE y = (sin psi, -cos psi, 0)) along the pull direction.
+        ee_rotation = top_down(float(np.arctan2(pull[0], -pull[1])))
+        return handle + HANDLE_OFFSET * pull, ee_rotation, pull
+
+    def plan_expert(self, sim: SimState | None, layout: Layout) -> MotionPlan:
+        parts, _, _ = drawer_frame(layout)
+        grasp, rotation, pull = self.handle_grasp(sim, layout)
+        out = grasp + pull * max(0.0, 0.95 * parts.travel - drawer_opening(sim, layout))
+        plan = MotionPlan(HOME_POSITION, top_down())
+        plan.move_to(grasp + np.array([0, 0, 0.10]), rotation)
+        plan.move_to(grasp, speed=0.15)
+        plan.hold(5, gripper=CLOSED)
+        plan.move_to(out, speed=0.12)
+        plan.release()
+        plan.retreat(0.10)
+        return plan
+
+    def obstacle_region(self, layout: Layout) -> np.ndarray:
+        """The approach from home to above the handle, where it is not over the cabinet."""
+        path = self.nominal_path(layout)
+        cabinet = layout.objects["drawer"]
+        return approach_clear_of(path[0], path[1], cabinet.position, cabinet.radius + 0.05)
+
+    def is_success(self, sim: SimState, layout: Layout) -> bool:
+        parts, _, _ = drawer_frame(layout)
+        return sim.joint_qpos(parts.joint) >= OPEN_FRACTION * parts.travel

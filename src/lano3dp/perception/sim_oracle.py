@@ -36,8 +36,13 @@ _STOPWORDS = frozenset("the a an this that these those some my our your its of o
 _TOKEN = re.compile(r"[a-z0-9]+")
 
 
+_PLURAL_ONLY = frozenset("scissors tongs pliers tweezers shears binoculars headphones".split())
+
+
 def singular(word: str) -> str:
     """Crude English singular for object nouns ("bowls" -> "bowl", "boxes" -> "box", "glasses" -> "glass")."""
+    if word in _PLURAL_ONLY:
+        return word
     if len(word) > 4 and word.endswith(("sses", "xes", "ches", "shes")):
         return word[:-2]
     if len(word) > 3 and word.endswith("s") and not word.endswith(("ss", "us", "is")):

@@ -1,0 +1,242 @@
+"""Skill registry: which policies exist, the verbs that call them and the objects they observe.
+
+A skill's `slots` are the object words its policy was trained on, in the order of the
+`object_clouds` axis (`attrs["object_names"]` of its dataset). A plan's targets must fill
+them in that order; `validate` enforces it so a decomposer (rules or LLM) cannot hand a
+policy its objects swapped.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from lano3dp.language.exceptions import SlotMismatchError, UnknownObjectError, UnknownSkillError
+from lano3dp.language.plan import TaskPlan
+from lano3dp.perception.sim_oracle import SceneObject, resolve_phrase, singular
+
+
+def _normalise_words(words: Iterable[str]) -> tuple[str, ...]:
+    return tuple(dict.fromkeys(" ".join(w.lower().replace("_", " ").split()) for w in words))
+
+
+class Slot(BaseModel):
+    """One object a skill's policy observes.
+
+    Attributes:
+        word: the object word the policy was trained on (the dataset's object name).
+        synonyms: other nouns that mean the same object ("skillet" for "pan"); include `word`.
+        accepts_any: the slot takes any graspable object (e.g. "put an item in the drawer"); a noun
+            that is no registered synonym still fills it and is kept as said.
+    """
+
+    model_config = ConfigDict(frozen=True)
+
+    word: str
+    synonyms: tuple[str, ...] = ()
+    accepts_any: bool = False
+
+    @field_validator("synonyms", mode="after")
+    @classmethod
+    def _with_word(cls, synonyms, info):
+        return _normalise_words([info.data.get("word", ""), *synonyms])
+
+    def matches(self, noun: str) -> bool:
+        """Whether `noun` (possibly a compound like "frying pan") names this slot's object."""
+        noun = " ".join(noun.lower().split())
+        if noun in self.synonyms:
+            return True
+        head = singular(noun.split()[-1]) if noun else ""
+        return head in self.synonyms or singular(noun) in self.synonyms
+
+
+class SkillSpec(BaseModel):
+    """A trained (or trainable) policy and how language refers to it.
+
+    Attributes:
+        name: registry key, also the simulator task name.
+        description: one sentence, shown to the LLM.
+        verbs: verb lemmas (or short verb phrases) that ask for this skill.
+        slots: the ordered objects the policy observes.
+        checkpoint: optional path to the trained policy folder.
+    """
+
+    model_config = ConfigDict(frozen=True)
+
+    name: str
+    description: str
+    verbs: tuple[str, ...]
+    slots: tuple[Slot, ...] = Field(min_length=1)
+    checkpoint: Path | None = None
+
+    @property
+    def slot_words(self) -> tuple[str, ...]:
+        return tuple(slot.word for slot in self.slots)
+
+
+class SkillRegistry:
+    """Skills by name, in a fixed order (the order ties are broken in)."""
+
+    def __init__(self, skills: Iterable[SkillSpec]):
+        self._skills: dict[str, SkillSpec] = {}
+        for skill in skills:
+            if skill.name in self._skills:
+                raise ValueError(f"skill '{skill.name}' is registered twice")
+            self._skills[skill.name] = skill
+
+    def __iter__(self):
+        return iter(self._skills.values())
+
+    def __len__(self) -> int:
+        return len(self._skills)
+
+    def __contains__(self, name: str) -> bool:
+        return name in self._skills
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(self._skills)
+
+    def get(self, name: str) -> SkillSpec:
+        try:
+            return self._skills[name]
+        except KeyError:
+            raise UnknownSkillError(name, self.names) from None
+
+    def with_checkpoint(self, name: str, path: str | Path) -> SkillRegistry:
+        """A copy where skill `name` points at a trained policy folder."""
+        skill = self.get(name).model_copy(update={"checkpoint": Path(path)})
+        return SkillRegistry(skill if s.name == name else s for s in self)
+
+    def validate(self, plan: TaskPlan, scene_objects: Sequence[str] | None = None) -> TaskPlan:
+        """Check `plan` against the registry (and the scene, if given); returns it unchanged.
+
+        Raises:
+            UnknownSkillError: the skill is not registered.
+            SlotMismatchError: wrong number of targets, or a target that names another slot's
+                object (targets out of slot order).
+            UnknownObjectError: with `scene_objects` (scene object names such as "red_bowl"),
+                a target or obstacle that matches none of them.
+        """
+        skill = self.get(plan.skill)
+        got = plan.target_phrases
+        if len(plan.targets) != len(skill.slots):
+            raise SlotMismatchError(skill.name, skill.slot_words, got)
+        for slot, target in zip(skill.slots, plan.targets, strict=True):
+            if not slot.matches(target.name) and any(s.matches(target.name) for s in skill.slots if s is not slot):
+                raise SlotMismatchError(skill.name, skill.slot_words, got)
+        if scene_objects is not None:
+            objects = scene_vocabulary(scene_objects)
+            names = [o.name for o in objects]
+            for role, refs in (("target", plan.targets), ("obstacle", plan.obstacles)):
+                for ref in refs:
+                    if not resolve_phrase(ref.phrase, objects):
+                        raise UnknownObjectError(ref.phrase, names, role)
+        return plan
+
+    def to_json(self) -> str:
+        return json.dumps([s.model_dump(mode="json") for s in self], indent=2)
+
+    @classmethod
+    def from_json(cls, text: str) -> SkillRegistry:
+        return cls(SkillSpec.model_validate(entry) for entry in json.loads(text))
+
+    @classmethod
+    def load(cls, path: str | Path) -> SkillRegistry:
+        return cls.from_json(Path(path).read_text())
+
+
+def scene_vocabulary(scene_objects: Sequence[str] | Sequence[SceneObject]) -> list[SceneObject]:
+    """Scene objects from names ("red_bowl", "pan") or ready `SceneObject`s."""
+    return [o if isinstance(o, SceneObject) else SceneObject.from_frame_entry(str(o), None) for o in scene_objects]
+
+
+def _slot(word: str, *synonyms: str, accepts_any: bool = False) -> Slot:
+    return Slot(word=word, synonyms=synonyms, accepts_any=accepts_any)
+
+
+_DRAWER = _slot("drawer")
+_BOTTLE = _slot("bottle", "flask")
+
+
+def default_registry() -> SkillRegistry:
+    """The simulator's tasks (the paper's three real tasks first, then its RLBench-style ones)."""
+    return SkillRegistry(
+        [
+            SkillSpec(
+                name="bowl_pour",
+                description="grasp the bowl and pour its contents into the pan",
+                verbs=("pour", "empty", "dump", "tip", "decant", "tilt", "fill", "transfer", "spill"),
+                slots=(_slot("bowl", "dish", "basin"), _slot("pan", "frying pan", "skillet", "pot", "saucepan", "wok")),
+            ),
+            SkillSpec(
+                name="bottle_upright",
+                description="stand a bottle that lies on its side upright",
+                verbs=("stand", "upright", "right", "erect", "raise"),
+                slots=(_BOTTLE,),
+            ),
+            SkillSpec(
+                name="bottle_in_drawer",
+                description="put the bottle into the open drawer",
+                verbs=("put", "place", "store", "stow", "insert", "drop", "move", "tuck", "set"),
+                slots=(_BOTTLE, _DRAWER),
+            ),
+            SkillSpec(
+                name="open_drawer",
+                description="pull the drawer open",
+                verbs=("open", "pull"),
+                slots=(_DRAWER,),
+            ),
+            SkillSpec(
+                name="close_microwave",
+                description="push the microwave door closed",
+                verbs=("close", "shut", "slam"),
+                slots=(_slot("microwave", "microwave oven", "oven"),),
+            ),
+            SkillSpec(
+                name="phone_on_base",
+                description="put the phone onto its charging base",
+                verbs=("put", "place", "dock", "return", "charge", "set", "rest", "hang"),
+                slots=(
+                    _slot(
+                        "phone",
+                        "cellphone",
+                        "cell phone",
+                        "smartphone",
+                        "mobile",
+                        "mobile phone",
+                        "handset",
+                        "telephone",
+                    ),
+                    _slot("base", "dock", "cradle", "charger", "charging base", "charging dock", "station"),
+                ),  # fmt: skip
+            ),
+            SkillSpec(
+                name="put_item_in_drawer",
+                description="put a small item (a block by default) into the open drawer",
+                verbs=("put", "place", "store", "stow", "insert", "drop", "move", "tuck", "set"),
+                slots=(_slot("block", "item", "object", "toy", accepts_any=True), _DRAWER),
+            ),
+            SkillSpec(
+                name="sweep_to_dustpan",
+                description="sweep the dirt into the dustpan with the broom",
+                verbs=("sweep", "brush"),
+                slots=(_slot("broom", "brush"), _slot("dustpan", "dust pan")),
+            ),
+            SkillSpec(
+                name="water_plants",
+                description="pour water on the plant with the watering can",
+                verbs=("water", "irrigate", "sprinkle"),
+                slots=(_slot("watering can", "sprinkler", "watering jug"), _slot("plant", "flower", "houseplant")),
+            ),
+            SkillSpec(
+                name="open_wine_bottle",
+                description="take the cork or cap off the wine bottle",
+                verbs=("open", "uncork", "uncap", "unscrew", "pop", "decork"),
+                slots=(_slot("bottle", "wine bottle", "wine"),),
+            ),
+        ]
+    )

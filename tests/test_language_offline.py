@@ -1,0 +1,117 @@
+"""The rule-based decomposer: instruction tables, obstacles, slot order, scene grounding, errors."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from lano3dp.language import (
+    InstructionNotUnderstoodError,
+    OfflineDecomposer,
+    SlotMismatchError,
+    UnknownObjectError,
+)
+
+DATA = Path(__file__).parent / "data"
+
+
+def exact_plan_rate(path):
+    cases = json.loads(path.read_text())["cases"]
+    decomposer = OfflineDecomposer()
+    failures = []
+    for case in cases:
+        try:
+            plan = decomposer.decompose(case["instruction"], case.get("objects"))
+            got = (plan.skill, plan.target_phrases, plan.obstacle_phrases)
+        except Exception as error:  # a failure to plan counts as a wrong plan
+            got = repr(error)
+        if got != (case["skill"], case["targets"], case["obstacles"]):
+            failures.append((case["instruction"], got))
+    return 1 - len(failures) / len(cases), len(cases), failures
+
+
+def test_instruction_table_exact_plan_rate():
+    rate, count, failures = exact_plan_rate(DATA / "instructions.json")
+    print(f"\noffline decomposer: {rate:.1%} exact plans on {count} instructions; failures: {failures}")
+    assert count >= 40
+    assert rate >= 0.90, failures
+
+
+def test_held_out_instruction_table_exact_plan_rate():
+    rate, count, failures = exact_plan_rate(DATA / "instructions_heldout.json")
+    print(f"\noffline decomposer (held out): {rate:.1%} exact plans on {count} instructions; failures: {failures}")
+    assert count >= 30
+    assert rate >= 0.85, failures
+
+
+@pytest.fixture(scope="module")
+def decomposer():
+    return OfflineDecomposer()
+
+
+def test_targets_follow_slot_order_not_mention_order(decomposer):
+    plan = decomposer.decompose("Fill the skillet with what's in the green bowl")
+    assert plan.skill == "bowl_pour" and plan.target_phrases == ["green bowl", "pan"]
+
+
+def test_several_obstacles_with_colours_and_sizes(decomposer):
+    plan = decomposer.decompose(
+        "Avoid the big red mug, the glass and the small vase, then put the phone on the base without touching the lamp"
+    )
+    assert plan.skill == "phone_on_base" and plan.target_phrases == ["phone", "base"]
+    assert plan.obstacle_phrases == ["large red mug", "glass", "small vase", "lamp"]
+
+
+def test_obstacle_nouns_do_not_pick_the_skill(decomposer):
+    plan = decomposer.decompose("Put the block in the drawer, keep clear of the bottle")
+    assert plan.skill == "put_item_in_drawer" and plan.obstacle_phrases == ["bottle"]
+
+
+def test_avoid_it_refers_to_the_object_named_before(decomposer):
+    plan = decomposer.decompose("Pour the bowl in the pan. Careful, the kettle is hot, avoid it!")
+    assert plan.target_phrases == ["bowl", "pan"] and plan.obstacle_phrases == ["kettle"]
+
+
+def test_implied_objects_take_the_slot_word(decomposer):
+    assert decomposer.decompose("Water the plant").target_phrases == ["watering can", "plant"]
+    assert decomposer.decompose("Sweep the crumbs into the dustpan").target_phrases == ["broom", "dustpan"]
+
+
+def test_any_item_fills_the_wildcard_slot(decomposer):
+    plan = decomposer.decompose("Put the stapler in the drawer")
+    assert plan.skill == "put_item_in_drawer" and plan.target_phrases == ["stapler", "drawer"]
+    plan = decomposer.decompose("put the bottle in the drawer")
+    assert plan.skill == "bottle_in_drawer"  # a dedicated skill beats the wildcard
+
+
+def test_verb_and_objects_disambiguate_shared_verbs(decomposer):
+    assert decomposer.decompose("Open the drawer").skill == "open_drawer"
+    assert decomposer.decompose("Open the wine bottle").skill == "open_wine_bottle"
+    assert decomposer.decompose("Set the bottle upright").skill == "bottle_upright"
+
+
+def test_instructions_no_skill_can_do_are_errors_not_guesses(decomposer):
+    with pytest.raises(InstructionNotUnderstoodError, match="no skill fits \\(verbs: close; objects: drawer\\)"):
+        decomposer.decompose("Close the drawer")
+    with pytest.raises(InstructionNotUnderstoodError, match="'open_drawer' and 'open_wine_bottle' equally"):
+        decomposer.decompose("Open it")
+    with pytest.raises(InstructionNotUnderstoodError, match="no skill fits"):
+        decomposer.decompose("What a nice day")
+
+
+def test_scene_vocabulary_grounds_synonyms_and_rejects_absent_objects(decomposer):
+    plan = decomposer.decompose("pour the bowl into the pot", ["dish", "frying_pan"])
+    assert plan.target_phrases == ["dish", "pan"]  # "bowl" resolved to the scene's dish via the slot synonyms
+    with pytest.raises(
+        UnknownObjectError, match="target 'green bowl' is not in the scene; the scene has: red_bowl, pan"
+    ):
+        decomposer.decompose("pour the green bowl into the pan", ["red_bowl", "pan"])
+    with pytest.raises(UnknownObjectError, match="obstacle 'vase'"):
+        decomposer.decompose("pour the bowl into the pan avoiding the vase", ["red_bowl", "pan"])
+
+
+def test_plans_are_validated_against_the_registry(decomposer):
+    plan = decomposer.decompose("Pour the bowl into the pan")
+    assert decomposer.registry.validate(plan) is plan
+    with pytest.raises(SlotMismatchError):
+        decomposer.registry.validate(plan.model_copy(update={"targets": plan.targets[:1]}))

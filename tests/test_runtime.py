@@ -189,7 +189,7 @@ def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(obser
     runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(margin=0.02)),
                           obstacle_phrases=["obstacle_0"])
     runner.push(frame, state)
-    (cylinder,) = list(runner.obstacle_cost)
+    (cylinder,) = list(runner.obstacles)
     assert isinstance(cylinder, Cylinder) and cylinder.xy_only
     # a 6 cm square post seen at 64x64 from one side: the covering circle sits within ~1.5 cm of its axis
     # and covers every seen point (radius >= half the side, at most a bit over half the diagonal + offset)

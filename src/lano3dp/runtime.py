@@ -36,7 +36,7 @@ import torch
 from lano3dp.errors import Lano3dpError
 from lano3dp.geometry.frame import RGBDFrame
 from lano3dp.guidance.checked import CheckConfig, checked_sample
-from lano3dp.guidance.costs import ObstacleSet, PointCloudObstacle, PositionCost
+from lano3dp.guidance.costs import MetricGradient, ObstacleSet, PointCloudObstacle, PositionCost
 from lano3dp.guidance.fitting import fit_box, fit_cylinder
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
 
@@ -103,6 +103,10 @@ class RuntimeConfig:
         checked: re-sample a chunk with a larger rho while its executed part still collides (None: off).
         on_unclear: under checked execution, what to do when no try is clear: "execute" the clearest try anyway
             (and count it) or "stop" the episode.
+        metric_gradient: make the guidance push isotropic in metres (`guidance.costs.MetricGradient`, from the
+            policy's action normaliser; beyond the paper). Without it the per-axis min-max normaliser makes the
+            push across a narrow demonstration range far weaker than the push along the path, and rho is in
+            normalised units; with it rho reads as metres per guided step.
         seed: seeds the sampling noise (one torch.Generator per runner, re-seeded on reset).
     """
 
@@ -113,6 +117,7 @@ class RuntimeConfig:
     obstacle: ObstacleModel = field(default_factory=ObstacleModel)
     checked: CheckConfig | None = None
     on_unclear: str = "execute"
+    metric_gradient: bool = False
     seed: int = 0
 
     def __post_init__(self):
@@ -128,8 +133,7 @@ class RuntimeConfig:
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
         if self.guidance is not None:
-            data["guidance"] = {"mode": self.guidance.mode.value, "scale": self.guidance.scale,
-                                "last_steps": self.guidance.last_steps}
+            data["guidance"]["mode"] = self.guidance.mode.value
         return data
 
 
@@ -257,6 +261,7 @@ class PolicyRunner:
         self.queue: deque[np.ndarray] = deque()
         self.chunks: list[ChunkRecord] = []
         self.obstacle_cost: PositionCost | None = None
+        self.obstacles: ObstacleSet | None = None
         self.held_radius: float | None = None
         self.step_count = 0
         self.stopped_reason: str | None = None
@@ -269,10 +274,29 @@ class PolicyRunner:
         self.queue.clear()
         self.chunks = []
         self.obstacle_cost = None
+        self.obstacles = None
         self.held_radius = None
         self.step_count = 0
         self.stopped_reason = None
         self.generator = torch.Generator().manual_seed(self.config.seed if seed is None else int(seed))
+
+    def set_objects(self, target_phrases: Sequence[str] | None = None,
+                    obstacle_phrases: Sequence[str] | None = None) -> None:
+        """Change what this episode's scene calls the targets (slot order) and which objects to avoid."""
+        if target_phrases is not None:
+            target_phrases = tuple(target_phrases)
+            if self.policy_config.obs_type == "objects" and len(target_phrases) != len(self.policy_config.object_names):
+                raise ValueError(f"the policy has {len(self.policy_config.object_names)} object slots but "
+                                 f"{len(target_phrases)} target phrases were given: {target_phrases}")
+            if self.held_object is not None and self.held_object == self.target_phrases[0]:
+                self.held_object = target_phrases[0]
+            self.target_phrases = target_phrases
+        if obstacle_phrases is not None:
+            if obstacle_phrases and self.observer is None:
+                raise ValueError(f"obstacles {tuple(obstacle_phrases)} need an observer to segment them")
+            self.obstacle_phrases = tuple(obstacle_phrases)
+        self.obstacle_cost = None
+        self.obstacles = None
 
     # ---- observations ------------------------------------------------------------------------
     def _default_visual(self, frame: RGBDFrame) -> np.ndarray:
@@ -328,7 +352,11 @@ class PolicyRunner:
         self.held_radius = self.measure_held_radius(frame)
         clouds = self.observer.observe(frame, self.obstacle_phrases)
         costs = [self.config.obstacle.fit(points, self.held_radius) for points in clouds.points]
-        return ObstacleSet(costs)
+        self.obstacles = ObstacleSet(costs)
+        if self.config.metric_gradient:
+            stats = self.policy.normalizer_stats()["action"]
+            return MetricGradient.from_stats(self.obstacles, stats["min"], stats["max"])
+        return self.obstacles
 
     # ---- acting ----------------------------------------------------------------------------
     def plan(self) -> ChunkRecord:
@@ -459,6 +487,7 @@ def _clearance(info: Mapping[str, Any]) -> float | None:
 
 def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] | None = None,
             max_steps: int | None = None, on_frame: Callable[[RGBDFrame, Mapping[str, Any]], None] | None = None,
+            on_reset: Callable[[PolicyRunner, RGBDFrame, Mapping[str, Any]], None] | None = None,
             stop_on_success: bool = True) -> EpisodeResult:
     """Run one closed-loop episode and measure it.
 
@@ -469,12 +498,16 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
         seed: env reset seed (and the runner's sampling seed).
         max_steps: step limit (default: the env's own truncation).
         on_frame: called with every frame and info (videos).
+        on_reset: called after the env reset with (runner, first frame, info), e.g. to name this scene's
+            targets and obstacles (`runner.set_objects`).
         stop_on_success: end the episode at the first step whose info says success.
     """
     started = time.perf_counter()
     runner.reset(seed)
     obs, info = env.reset(seed=seed, options=dict(options or {}))
     frame, state = observe(env, obs)
+    if on_reset is not None:
+        on_reset(runner, frame, info)
     positions = [state[:3].copy()]
     success = bool(info.get("success", False))
     collided = _obstacle_contact(info)
@@ -514,6 +547,6 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
         chunk_predicted_clearance=[None if c.predicted_clearance is None else round(c.predicted_clearance, 5)
                                    for c in runner.chunks],
         ee_path=ee_path,
-        obstacles=[repr(o) for o in runner.obstacle_cost] if isinstance(runner.obstacle_cost, ObstacleSet) else [],
+        obstacles=[repr(o) for o in runner.obstacles] if runner.obstacles is not None else [],
         held_radius=runner.held_radius, error=error, wall_s=time.perf_counter() - started,
     )

@@ -1,7 +1,83 @@
-"""Placeholder until its owner lands the command."""
+"""`lano3dp eval`: closed-loop rollouts of a checkpoint in the simulator, to a results JSON."""
+
+from __future__ import annotations
+
+from pathlib import Path
 
 import typer
 
 
 def register(app: typer.Typer) -> None:
-    pass
+    app.command("eval")(eval_command)
+
+
+def eval_command(
+    checkpoint: Path = typer.Option(..., "--checkpoint", "-c",
+                                    help="Policy folder or training run (its last checkpoint)."),
+    task: str = typer.Option(None, help="Task name (default: the task of the checkpoint's dataset)."),
+    variation: str = typer.Option("clean", help="clean, or axes joined by '+': clutter, similar, instance, camera, "
+                                                "background, obstacle."),
+    episodes: int = typer.Option(20, min=1, help="Number of episodes (seeds seed, seed+1, ...)."),
+    obstacles: list[str] = typer.Option(None, "--obstacles", help="Object to avoid (repeatable). Default: every "
+                                                                  "object the scene marks as an obstacle."),
+    guidance: str = typer.Option("none", help="none | noisy (cost on A_k) | clean (the paper's A_0|k)."),
+    rho: float = typer.Option(0.5, help="Guidance scale rho."),
+    last_steps: int = typer.Option(10, help="Guide only the last S training-scale denoising steps."),
+    per_train_step: bool = typer.Option(True, help="Scale rho by the scheduler stride (DDIM pushes as much as DDPM)."),
+    scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
+    steps: int = typer.Option(None, help="Denoising steps (default: the policy's)."),
+    checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
+    margin: float = typer.Option(0.02, help="Safety margin (m) beyond contact, part of Q*."),
+    held_radius: float = typer.Option(None, help="Held-object extent (m) in Q*; default: measured from its cloud."),
+    max_steps: int = typer.Option(None, help="Episode step limit (default: the task's)."),
+    workers: int = typer.Option(1, min=1, help="Parallel episode processes (1 torch thread each)."),
+    video_dir: Path = typer.Option(None, help="Write MP4s of the first --n-videos episodes here."),
+    n_videos: int = typer.Option(2, help="How many episodes get a video."),
+    seed: int = typer.Option(100_000, help="First episode seed (apart from the demonstration seeds)."),
+    out: Path = typer.Option(Path("results.json"), help="Results JSON."),
+) -> None:
+    """Evaluate a policy: success, obstacle contacts, minimum clearance, path length and latency per chunk."""
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from lano3dp.evaluate import EvalConfig, evaluate
+
+    config = EvalConfig(
+        checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
+        obstacles=list(obstacles) if obstacles else None, guidance=guidance, rho=rho, last_steps=last_steps,
+        per_train_step=per_train_step, scheduler=scheduler, steps=steps, checked=checked, margin=margin,
+        held_radius=held_radius, max_steps=max_steps, workers=workers,
+        video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out))
+    console = Console(stderr=True)
+    console.print(f"[bold]eval[/bold] {checkpoint} on {task or '(dataset task)'} / {variation}: {episodes} episodes, "
+                  f"guidance {guidance}" + (f" rho={rho} S={last_steps}" if guidance != "none" else "")
+                  + f", {workers} worker(s)")
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  TextColumn("{task.fields[status]}"), console=console) as bar:
+        handle = bar.add_task("episodes", total=episodes, status="")
+        successes = collisions = 0
+
+        def progress(done: int, total: int, record: dict) -> None:
+            nonlocal successes, collisions
+            successes += bool(record["success"])
+            collisions += bool(record["collided"])
+            bar.update(handle, completed=done, status=f"success {successes}/{done}  collided {collisions}/{done}")
+
+        result = evaluate(config, progress=progress)
+    console.print(summary_line(result["summary"]))
+    summary = result["summary"]
+    if summary["errors"]:
+        console.print(f"[yellow]episodes ended by errors:[/yellow] {', '.join(summary['errors'])}")
+    console.print(f"results: {out}")
+
+
+def summary_line(summary: dict) -> str:
+    """One human line for a results summary."""
+    parts = [f"success {summary['success_rate']:.0%} ({summary['successes']}/{summary['episodes']})",
+             f"collisions {summary['collision_rate']:.0%}"]
+    if summary["mean_min_clearance"] is not None:
+        parts.append(f"mean min clearance {summary['mean_min_clearance'] * 100:.1f} cm")
+    parts.append(f"path {summary['mean_path_length']:.2f} m")
+    if summary["latency_mean_s"] is not None:
+        parts.append(f"latency {summary['latency_mean_s'] * 1000:.0f} ms/chunk")
+    return ", ".join(parts)

@@ -1,0 +1,345 @@
+"""Closed-loop evaluation of a checkpoint in the simulator: many episodes, in parallel, to one JSON.
+
+    result = evaluate(EvalConfig(checkpoint="runs/bowl", task="bowl_pour", variation="obstacle",
+                                 episodes=20, guidance="clean", rho=0.5))
+    result["summary"]["success_rate"], result["summary"]["collision_rate"]
+
+Each episode is a fresh `TabletopEnv` scene from its seed (seed, seed + 1, ...; the default first
+seed 100000 keeps evaluation scenes apart from demonstration seeds, which start at 0). Episodes run in
+`workers` spawned processes with one torch thread each (two OpenMP threads per process stall on a
+shared 2-core machine; notes/cpu-cost.md sec. 1), and results come back in seed order, so the JSON does
+not depend on the number of workers. Latencies measured with several workers include their contention.
+
+Perception in simulation is the ground-truth segmenter (`SimOracleSegmenter`); targets are named by
+the phrases the scene uses (e.g. "blue bowl" among look-alikes) and obstacles, by default, are the
+objects the scene marks as obstacles. Crop box, points per object and image size follow the dataset
+the checkpoint was trained on (found through its train_config.json), so evaluation sees what
+training saw.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import multiprocessing as mp
+import os
+import shlex
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+DEFAULT_EVAL_SEED = 100_000
+SUMMARY_FIELDS = ("episodes", "success_rate", "collision_rate", "safe_success_rate", "error_rate",
+                  "mean_min_clearance", "mean_path_length", "mean_steps", "latency_mean_s", "latency_p95_s")
+
+
+@dataclass
+class EvalConfig:
+    """One evaluation (saved verbatim in the results JSON).
+
+    Attributes:
+        checkpoint: a policy folder or a training run (its checkpoints/last).
+        task: simulator task name (default: the task the checkpoint's dataset was recorded on).
+        variation: "clean" or axes joined by "+" (e.g. "obstacle", "clutter+camera").
+        episodes: how many episodes; seeds are seed, seed + 1, ...
+        seed: first episode seed (also seeds the sampling noise of each episode).
+        obstacles: phrases of the objects to avoid; None = every object the scene marks as an obstacle.
+        guidance: "none", "noisy" (cost on A_k) or "clean" (the paper's A_0|k).
+        rho, last_steps, per_train_step: the guidance scale, S, and whether rho is scaled by the scheduler stride.
+        scheduler, steps: inference scheduler and its number of denoising steps (None: the policy's default).
+        checked: checked execution (re-sample with a larger rho while the executed part collides).
+        margin, held_radius: obstacle model; held_radius None measures it from the held object's cloud.
+        n_action_steps: actions executed per chunk (None: the policy's).
+        max_steps: episode step limit (None: the task's).
+        image_size: camera resolution (None: the dataset's).
+        workers: parallel processes (1 runs in this process).
+        video_dir, n_videos: write MP4s of the first n_videos episodes there.
+        out: results JSON path (None: not written).
+    """
+
+    checkpoint: str
+    task: str | None = None
+    variation: str = "clean"
+    episodes: int = 20
+    seed: int = DEFAULT_EVAL_SEED
+    obstacles: list[str] | None = None
+    guidance: str = "none"
+    rho: float = 0.5
+    last_steps: int = 10
+    per_train_step: bool = True
+    scheduler: str | None = None
+    steps: int | None = None
+    checked: bool = False
+    margin: float = 0.02
+    held_radius: float | None = None
+    n_action_steps: int | None = None
+    max_steps: int | None = None
+    image_size: int | None = None
+    workers: int = 1
+    video_dir: str | None = None
+    n_videos: int = 2
+    out: str | None = None
+
+    def __post_init__(self):
+        self.checkpoint = str(self.checkpoint)
+        if self.episodes < 1 or self.workers < 1:
+            raise ValueError(f"episodes and workers must be >= 1, got {self.episodes}, {self.workers}")
+        if self.guidance not in ("none", "noisy", "clean"):
+            raise ValueError(f"guidance must be 'none', 'noisy' or 'clean', got {self.guidance!r}")
+
+
+@dataclass(frozen=True)
+class DatasetSettings:
+    """What evaluation copies from the training data: where the camera looked and how clouds were made."""
+
+    task: str | None = None
+    image_size: int | None = None
+    n_points: int | None = None
+    crop_low: tuple[float, ...] | None = None
+    crop_high: tuple[float, ...] | None = None
+    data: str | None = None
+
+
+def dataset_settings(checkpoint: str | Path) -> DatasetSettings:
+    """Read the training dataset's attributes through the checkpoint's train_config.json (if any)."""
+    from lano3dp.data.store import EpisodeStore
+    from lano3dp.policy.modeling import resolve_checkpoint
+
+    folder = resolve_checkpoint(checkpoint)
+    candidates = [folder / "train_config.json", folder.parent.parent / "train_config.json",
+                  Path(checkpoint) / "train_config.json"]
+    for path in candidates:
+        if not path.exists():
+            continue
+        data = json.loads(path.read_text()).get("data")
+        if not data or not Path(data).exists():
+            break
+        attrs = EpisodeStore.open(data).attrs
+        camera = attrs.get("camera") or {}
+        low, high = attrs.get("crop_low"), attrs.get("crop_high")
+        return DatasetSettings(task=attrs.get("task"), image_size=camera.get("height"),
+                               n_points=attrs.get("n_points"), crop_low=None if low is None else tuple(low),
+                               crop_high=None if high is None else tuple(high), data=str(data))
+    return DatasetSettings()
+
+
+def guidance_config(config: EvalConfig):
+    from lano3dp.guidance import GuidanceConfig
+
+    if config.guidance == "none":
+        return None
+    return GuidanceConfig(mode=config.guidance, scale=config.rho, last_steps=config.last_steps,
+                          per_train_step=config.per_train_step)
+
+
+def runtime_config(config: EvalConfig, seed: int):
+    from lano3dp.guidance import CheckConfig
+    from lano3dp.runtime import ObstacleModel, RuntimeConfig
+
+    return RuntimeConfig(
+        guidance=guidance_config(config), scheduler=config.scheduler, num_inference_steps=config.steps,
+        n_action_steps=config.n_action_steps,
+        obstacle=ObstacleModel(margin=config.margin, held_radius=config.held_radius),
+        checked=CheckConfig(initial_scale=max(config.rho, 1e-3)) if config.checked else None, seed=seed)
+
+
+# ---- one process: policy + env + episodes ---------------------------------------------------------
+class EpisodeRunner:
+    """Loads the policy and builds the env once, then runs episodes by seed (used by every worker)."""
+
+    def __init__(self, config: EvalConfig):
+        from lano3dp.perception import ObjectObserver, SimOracleSegmenter
+        from lano3dp.policy import DiffusionPolicy
+        from lano3dp.sim import TabletopEnv
+
+        self.config = config
+        self.policy = DiffusionPolicy.from_pretrained(config.checkpoint)
+        settings = dataset_settings(config.checkpoint)
+        self.settings = settings
+        task = config.task or settings.task or self.policy.config.extra.get("task")
+        if task is None:
+            raise ValueError("no task given and the checkpoint does not say which task it was trained on; pass --task")
+        self.task = task
+        image_size = config.image_size or settings.image_size or 128
+        needs_rgb = self.policy.config.obs_type == "image" or bool(config.video_dir)
+        self.env = TabletopEnv(task, variation=config.variation, image_size=image_size, render_rgb=needs_rgb,
+                               max_steps=config.max_steps)
+        self.observer = ObjectObserver(SimOracleSegmenter(), n_points=settings.n_points or self.policy.config.n_points,
+                                       crop_low=settings.crop_low, crop_high=settings.crop_high)
+
+    def run(self, seed: int, video_path: str | None = None) -> dict[str, Any]:
+        from lano3dp.runtime import PolicyRunner, rollout, scene_obstacles
+
+        config = self.config
+        runner = PolicyRunner(self.policy, self.observer, runtime_config(config, seed))
+        slots = tuple(self.policy.config.object_names)
+
+        def on_reset(runner: PolicyRunner, frame, info) -> None:
+            phrases = info.get("target_phrases") or {}
+            targets = [phrases.get(slot, slot) for slot in slots] if slots else None
+            obstacles = config.obstacles if config.obstacles is not None else scene_obstacles(frame)
+            runner.set_objects(targets if runner.policy_config.obs_type == "objects" else None, obstacles)
+
+        frames: list[np.ndarray] = []
+        on_frame = (lambda frame, info: frames.append(frame.rgb.copy())) if video_path else None
+        result = rollout(self.env, runner, seed=seed, on_reset=on_reset, on_frame=on_frame,
+                         max_steps=config.max_steps)
+        record = result.to_dict(include_path=True)
+        if video_path and frames:
+            write_video(video_path, frames)
+            record["video"] = video_path
+        return record
+
+    def close(self) -> None:
+        self.env.close()
+
+
+def write_video(path: str | Path, frames: Sequence[np.ndarray], fps: int = 10) -> Path:
+    """Frames (H, W, 3) uint8 -> an MP4 (H.264 via imageio-ffmpeg); a GIF when the path ends in .gif."""
+    import imageio.v2 as imageio
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix == ".gif":
+        imageio.mimsave(path, list(frames), duration=1000 / fps, loop=0)
+    else:
+        # macro_block_size=1 keeps odd sizes as they are instead of resizing with a warning
+        imageio.mimsave(path, list(frames), fps=fps, macro_block_size=1)
+    return path
+
+
+_WORKER: EpisodeRunner | None = None
+
+
+def _worker_init(config_dict: dict[str, Any]) -> None:
+    global _WORKER
+    os.environ["OMP_NUM_THREADS"] = "1"
+    import torch
+
+    torch.set_num_threads(1)
+    _WORKER = EpisodeRunner(EvalConfig(**config_dict))
+
+
+def _worker_run(job: tuple[int, int, str | None]) -> tuple[int, dict[str, Any]]:
+    index, seed, video = job
+    return index, _WORKER.run(seed, video)
+
+
+# ---- the whole evaluation ------------------------------------------------------------------------
+def summarize(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """Aggregate per-episode records into rates and means (clearance only over episodes that measured one)."""
+    n = len(episodes)
+    latencies = np.array([t for e in episodes for t in e["chunk_latency_s"]], dtype=np.float64)
+    clearances = [e["min_clearance"] for e in episodes if e["min_clearance"] is not None]
+
+    def rate(flag: Callable[[dict], bool]) -> float:
+        return round(sum(bool(flag(e)) for e in episodes) / n, 4) if n else float("nan")
+
+    def mean(values) -> float | None:
+        values = list(values)
+        return round(float(np.mean(values)), 5) if values else None
+
+    return {
+        "episodes": n,
+        "successes": sum(bool(e["success"]) for e in episodes),
+        "success_rate": rate(lambda e: e["success"]),
+        "collision_rate": rate(lambda e: e["collided"]),
+        "safe_success_rate": rate(lambda e: e["success"] and not e["collided"]),
+        "error_rate": rate(lambda e: e["error"] is not None),
+        "mean_min_clearance": mean(clearances),
+        "worst_min_clearance": round(min(clearances), 5) if clearances else None,
+        "mean_path_length": mean(e["path_length"] for e in episodes),
+        "mean_steps": mean(e["steps"] for e in episodes),
+        "chunks": int(latencies.size),
+        "latency_mean_s": round(float(latencies.mean()), 5) if latencies.size else None,
+        "latency_p95_s": round(float(np.quantile(latencies, 0.95)), 5) if latencies.size else None,
+        "mean_tries": mean(t for e in episodes for t in e["chunk_tries"]),
+        "errors": sorted({e["error"].split(":")[0] for e in episodes if e["error"]}),
+    }
+
+
+def evaluate(config: EvalConfig, progress: Callable[[int, int, dict], None] | None = None,
+             command: str | None = None) -> dict[str, Any]:
+    """Run every episode and return (and, with `config.out`, write) the results dict.
+
+    Args:
+        progress: called after each finished episode with (done, total, record).
+        command: the command line to record (default: this process's argv).
+    """
+    from lano3dp.data.store import library_versions
+    from lano3dp.policy.modeling import load_config, resolve_checkpoint
+
+    started = time.perf_counter()
+    started_at = datetime.now(UTC).isoformat(timespec="seconds")
+    checkpoint = resolve_checkpoint(config.checkpoint)
+    seeds = [config.seed + i for i in range(config.episodes)]
+    jobs = []
+    for index, seed in enumerate(seeds):
+        video = None
+        if config.video_dir and index < config.n_videos:
+            video = str(Path(config.video_dir) / f"episode_{seed}.mp4")
+        jobs.append((index, seed, video))
+    records: list[dict[str, Any] | None] = [None] * len(jobs)
+    workers = min(config.workers, len(jobs))
+    if workers == 1:
+        runner = EpisodeRunner(config)
+        try:
+            for done, (index, seed, video) in enumerate(jobs, 1):
+                records[index] = runner.run(seed, video)
+                if progress:
+                    progress(done, len(jobs), records[index])
+        finally:
+            runner.close()
+    else:
+        context = mp.get_context("spawn")
+        with context.Pool(workers, initializer=_worker_init, initargs=(asdict(config),)) as pool:
+            for done, (index, record) in enumerate(pool.imap_unordered(_worker_run, jobs), 1):
+                records[index] = record
+                if progress:
+                    progress(done, len(jobs), record)
+    episodes = [r for r in records if r is not None]
+    summary = summarize(episodes)
+    result = {
+        "command": command if command is not None else shlex.join(["lano3dp", *sys.argv[1:]]),
+        "config": asdict(config),
+        "checkpoint": str(checkpoint),
+        "policy": load_config(checkpoint / "config.json").to_dict(),
+        "summary": summary,
+        "episodes": episodes,
+        "timing": {"started_utc": started_at, "wall_s": round(time.perf_counter() - started, 2),
+                   "workers": workers, "cpu_count": os.cpu_count()},
+        "versions": library_versions(),
+    }
+    if config.out:
+        write_json(config.out, result)
+    return result
+
+
+def write_json(path: str | Path, data: Any) -> Path:
+    """Write JSON atomically (temporary file + rename), converting numpy scalars and non-finite floats."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(path.name + ".tmp")
+    temporary.write_text(json.dumps(_jsonable(data), indent=2) + "\n")
+    os.replace(temporary, path)
+    return path
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value

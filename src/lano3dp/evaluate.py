@@ -34,6 +34,8 @@ from typing import Any
 
 import numpy as np
 
+from lano3dp.errors import Lano3dpError
+
 DEFAULT_EVAL_SEED = 100_000
 SUMMARY_FIELDS = ("episodes", "success_rate", "collision_rate", "safe_success_rate", "error_rate",
                   "mean_min_clearance", "mean_path_length", "mean_steps", "latency_mean_s", "latency_p95_s")
@@ -343,3 +345,151 @@ def _jsonable(value):
     if isinstance(value, float) and not math.isfinite(value):
         return None
     return value
+
+
+# ---- one instruction, end to end -----------------------------------------------------------------
+@dataclass
+class RunConfig:
+    """`lano3dp run`: instruction -> plan -> perception -> (guided) policy -> one simulated episode.
+
+    Attributes:
+        instruction: what the user says, e.g. "pour the bowl into the pan and keep clear of the grey cylinder".
+        checkpoint: the policy to run (default: the plan's skill's checkpoint in `registry`).
+        registry: a skill registry JSON (SkillRegistry.to_json) naming a checkpoint per skill.
+        task: simulator task (default: the plan's skill, whose registry name is the task name).
+        variation: scene variation (default: "obstacle" when the plan names obstacles, else "clean").
+        guidance, rho, last_steps, per_train_step, scheduler, steps, checked, margin: as EvalConfig.
+        compare: also run the same scene without guidance, for the plot.
+        seed: scene seed.
+        out: folder for run.json, video.mp4 and top_view.png.
+    """
+
+    instruction: str
+    checkpoint: str | None = None
+    registry: str | None = None
+    task: str | None = None
+    variation: str | None = None
+    guidance: str = "clean"
+    rho: float = 0.5
+    last_steps: int = 10
+    per_train_step: bool = True
+    scheduler: str | None = None
+    steps: int | None = None
+    checked: bool = False
+    margin: float = 0.02
+    compare: bool = False
+    max_steps: int | None = None
+    seed: int = DEFAULT_EVAL_SEED
+    out: str = "run_out"
+
+
+def ground_obstacles(frame, phrases: Sequence[str]) -> tuple[list[str], list[str]]:
+    """Obstacle phrases -> what to segment in this scene, plus notes for the user.
+
+    A phrase the scene has is kept. The simulator's obstacles are plain grey cylinders, so a phrase it
+    does not have ("the mug") is mapped onto the scene's obstacle objects instead, and a note says so.
+    """
+    from lano3dp.perception import SimOracleSegmenter
+    from lano3dp.perception.exceptions import PerceptionError
+    from lano3dp.runtime import scene_obstacles
+
+    segmenter = SimOracleSegmenter()
+    kept, missing, notes = [], [], []
+    for phrase in phrases:
+        try:
+            found = segmenter.segment(frame, [phrase])[0].found
+        except PerceptionError:  # ambiguous: several objects match; keep the phrase, perception will say more
+            found = True
+        (kept if found else missing).append(phrase)
+    if missing:
+        stand_ins = [name for name in scene_obstacles(frame) if name not in kept]
+        if not stand_ins:
+            raise ValueError(f"obstacle(s) {', '.join(repr(m) for m in missing)} are not in the scene and the scene "
+                             f"has no obstacle objects; objects: {', '.join(sorted(frame.instance_names))}")
+        notes.append(f"{', '.join(repr(m) for m in missing)} not in the simulated scene; avoiding its obstacle "
+                     f"object(s) {', '.join(stand_ins)} instead")
+        kept += stand_ins
+    return kept, notes
+
+
+def run_instruction(config: RunConfig, log: Callable[[str], None] = print) -> dict[str, Any]:
+    """Plan, perceive, act: one episode for one instruction. Writes run.json, video.mp4 and top_view.png."""
+    from lano3dp.language import OfflineDecomposer, SkillRegistry, UnknownObjectError, default_registry
+    from lano3dp.perception import ObjectObserver, SimOracleSegmenter
+    from lano3dp.policy import DiffusionPolicy
+    from lano3dp.report import plot_top_view
+    from lano3dp.runtime import PolicyRunner, rollout
+    from lano3dp.sim import TabletopEnv
+
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    registry = SkillRegistry.load(config.registry) if config.registry else default_registry()
+    decomposer = OfflineDecomposer(registry)
+    plan = decomposer.decompose(config.instruction)
+    log(f"plan: {plan.summary()}")
+    checkpoint = config.checkpoint or (registry.get(plan.skill).checkpoint if plan.skill in registry else None)
+    if checkpoint is None:
+        raise ValueError(f"no checkpoint for skill '{plan.skill}': pass --checkpoint, or a --registry naming one")
+    policy = DiffusionPolicy.from_pretrained(checkpoint)
+    settings = dataset_settings(checkpoint)
+    task = config.task or plan.skill
+    variation = config.variation or ("obstacle" if plan.obstacles else "clean")
+    env = TabletopEnv(task, variation=variation, image_size=settings.image_size or 128, render_rgb=True,
+                      max_steps=config.max_steps)
+    observer = ObjectObserver(SimOracleSegmenter(), n_points=settings.n_points or policy.config.n_points,
+                              crop_low=settings.crop_low, crop_high=settings.crop_high)
+    _, _ = env.reset(seed=config.seed)
+    frame = env.frame()
+    scene_objects = [n for n, a in frame.instance_attributes.items() if a.get("role") != "robot"]
+    try:
+        plan = decomposer.decompose(config.instruction, scene_objects)
+        obstacles, notes = list(plan.obstacle_phrases), []
+    except UnknownObjectError as error:  # e.g. an obstacle the simulator cannot show: stand in its obstacles
+        log(f"note: {error}")
+        obstacles, notes = ground_obstacles(frame, plan.obstacle_phrases)
+    for note in notes:
+        log(f"note: {note}")
+    targets = plan.target_phrases if policy.config.obs_type == "objects" else None
+    log(f"task {task} / {variation}, seed {config.seed}: targets {targets}, obstacles {obstacles}")
+
+    conditions = [("guided" if config.guidance != "none" else "unguided", config.guidance)]
+    if config.compare and config.guidance != "none":
+        conditions.append(("unguided", "none"))
+    episodes, paths = {}, []
+    for label, mode in conditions:
+        eval_config = EvalConfig(checkpoint=str(checkpoint), guidance=mode, rho=config.rho,
+                                 last_steps=config.last_steps, per_train_step=config.per_train_step,
+                                 scheduler=config.scheduler, steps=config.steps, checked=config.checked,
+                                 margin=config.margin)
+        runner = PolicyRunner(policy, observer, runtime_config(eval_config, config.seed), target_phrases=targets,
+                              obstacle_phrases=obstacles)
+        frames: list[np.ndarray] = []
+        result = rollout(env, runner, seed=config.seed, max_steps=config.max_steps,
+                         on_frame=lambda f, info, frames=frames: frames.append(f.rgb.copy()))
+        video = write_video(out / f"video_{label}.mp4", frames)
+        record = result.to_dict(include_path=True)
+        record["video"] = str(video)
+        episodes[label] = record
+        paths.append((f"{label}: {'success' if result.success else 'failure'}"
+                       + (", collided" if result.collided else ""), result.ee_path))
+        clearance = "–" if result.min_clearance is None else f"{100 * result.min_clearance:.1f} cm"
+        log(f"{label}: {'SUCCESS' if result.success else 'failure'} after {result.steps} steps, "
+            f"obstacle contact: {'yes' if result.collided else 'no'}, min clearance {clearance}, "
+            f"path {result.path_length:.2f} m, {len(result.chunk_latency_s)} chunks, "
+            f"mean latency {1000 * np.mean(result.chunk_latency_s or [0]):.0f} ms"
+            + (f" ({result.error})" if result.error else ""))
+    first = episodes[conditions[0][0]]
+    objects = {}
+    for phrase in targets or []:
+        try:
+            objects[phrase] = observer.observe(frame, [phrase]).points[0].mean(0)[:2]
+        except Lano3dpError:
+            pass
+    plot = plot_top_view(out / "top_view.png", paths, obstacles=first["obstacles"], objects=objects,
+                         title=f"'{config.instruction}'")
+    result = {"command": shlex.join(["lano3dp", *sys.argv[1:]]), "config": asdict(config), "plan": plan.model_dump(),
+              "task": task, "variation": variation, "obstacles": obstacles, "notes": notes,
+              "checkpoint": str(checkpoint), "episodes": episodes, "top_view": str(plot)}
+    write_json(out / "run.json", result)
+    env.close()
+    return result

@@ -436,7 +436,7 @@ class EpisodeResult:
         chunk_tries: samples drawn per chunk (checked execution).
         chunk_predicted_clearance: per chunk, the runner's own clearance estimate of the executed waypoints.
         ee_path: (steps + 1, 3) EE positions, metres (kept for plots; dropped from JSON by default).
-        obstacles: fitted obstacle shapes (repr) the runner guided against.
+        obstacles: the fitted obstacle shapes the runner guided against (see `describe_obstacle`).
         held_radius: m, the held extent used in Q*.
         error: why the episode ended early (perception failure, no clear chunk), or None.
         wall_s: wall time of the episode, seconds.
@@ -453,7 +453,7 @@ class EpisodeResult:
     chunk_tries: list[int]
     chunk_predicted_clearance: list[float | None]
     ee_path: np.ndarray
-    obstacles: list[str] = field(default_factory=list)
+    obstacles: list[dict[str, Any]] = field(default_factory=list)
     held_radius: float | None = None
     error: str | None = None
     wall_s: float = 0.0
@@ -465,6 +465,20 @@ class EpisodeResult:
         if not include_path:
             data.pop("ee_path")
         return data
+
+
+def describe_obstacle(obstacle) -> dict[str, Any]:
+    """A fitted obstacle as plain data (for JSON and plots): shape, centre, size and safety distance, metres."""
+    from lano3dp.guidance.costs import Cylinder, OrientedBox
+
+    data: dict[str, Any] = {"shape": type(obstacle).__name__, "repr": repr(obstacle)}
+    if isinstance(obstacle, Cylinder):
+        data.update(center=[round(float(c), 5) for c in obstacle.center], radius=round(obstacle.radius, 5),
+                    safety_distance=round(obstacle.safety_distance, 5))
+    elif isinstance(obstacle, OrientedBox):
+        data.update(center=[round(float(c), 5) for c in obstacle.center[:2]], corners=obstacle.corners_xy().tolist(),
+                    half_extents=[round(float(h), 5) for h in obstacle.half_extents])
+    return data
 
 
 def path_length(positions: np.ndarray) -> float:
@@ -547,6 +561,6 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
         chunk_predicted_clearance=[None if c.predicted_clearance is None else round(c.predicted_clearance, 5)
                                    for c in runner.chunks],
         ee_path=ee_path,
-        obstacles=[repr(o) for o in runner.obstacles] if runner.obstacles is not None else [],
+        obstacles=[describe_obstacle(o) for o in runner.obstacles] if runner.obstacles is not None else [],
         held_radius=runner.held_radius, error=error, wall_s=time.perf_counter() - started,
     )

@@ -1,7 +1,48 @@
-"""Placeholder until its owner lands the command."""
+"""`lano3dp run "<instruction>"`: plan -> perception -> guided policy -> one simulated episode."""
+
+from __future__ import annotations
+
+from pathlib import Path
 
 import typer
 
 
 def register(app: typer.Typer) -> None:
-    pass
+    app.command("run")(run_command)
+
+
+def run_command(
+    instruction: str = typer.Argument(..., help='e.g. "pour the bowl into the pan and keep clear of the obstacle"'),
+    checkpoint: Path = typer.Option(None, "--checkpoint", "-c", help="Policy to run (default: from --registry)."),
+    registry: Path = typer.Option(None, help="Skill registry JSON naming a checkpoint per skill."),
+    task: str = typer.Option(None, help="Simulator task (default: the plan's skill)."),
+    variation: str = typer.Option(None, help="Scene variation (default: obstacle if the plan names obstacles)."),
+    guidance: str = typer.Option("clean", help="none | noisy | clean (the paper's A_0|k guidance)."),
+    rho: float = typer.Option(0.5, help="Guidance scale rho."),
+    last_steps: int = typer.Option(10, help="Guide the last S training-scale denoising steps."),
+    scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
+    steps: int = typer.Option(None, help="Denoising steps (default: the policy's)."),
+    checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
+    compare: bool = typer.Option(False, help="Also run the same scene without guidance (both paths in the plot)."),
+    max_steps: int = typer.Option(None, help="Episode step limit (default: the task's)."),
+    seed: int = typer.Option(100_000, help="Scene seed."),
+    out: Path = typer.Option(Path("run_out"), help="Folder for run.json, video_*.mp4 and top_view.png."),
+) -> None:
+    """Run one instruction in the simulator and show what happened (plan, outcome, video, top-view plot)."""
+    from rich.console import Console
+
+    from lano3dp.errors import Lano3dpError
+    from lano3dp.evaluate import RunConfig, run_instruction
+
+    console = Console()
+    config = RunConfig(instruction=instruction, checkpoint=str(checkpoint) if checkpoint else None,
+                       registry=str(registry) if registry else None, task=task, variation=variation,
+                       guidance=guidance, rho=rho, last_steps=last_steps, scheduler=scheduler, steps=steps,
+                       checked=checked, compare=compare, max_steps=max_steps, seed=seed, out=str(out))
+    try:
+        result = run_instruction(config, log=console.print)
+    except (Lano3dpError, ValueError, FileNotFoundError) as error:
+        console.print(f"[red]error:[/red] {error}")
+        raise typer.Exit(1) from error
+    console.print(f"video(s): {', '.join(e['video'] for e in result['episodes'].values())}")
+    console.print(f"top view: {result['top_view']}   record: {Path(out) / 'run.json'}")

@@ -1,0 +1,125 @@
+"""Plots and Markdown for evaluation results (matplotlib, Agg backend: no display needed).
+
+    plot_top_view    executed EE paths seen from above, with the fitted obstacles (radius and Q*)
+    plot_rates       success / collision rates of several conditions side by side
+    markdown_table   a GitHub table from rows of cells
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+_COLORS = ("tab:blue", "tab:orange", "tab:green", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_top_view(path: str | Path, runs: Sequence[tuple[str, np.ndarray]], *,
+                  obstacles: Sequence[Mapping[str, Any]] = (), objects: Mapping[str, Sequence[float]] | None = None,
+                  title: str = "executed end-effector path (top view)") -> Path:
+    """Top view (x, y) of executed EE paths.
+
+    Args:
+        path: PNG to write.
+        runs: (label, (T, 3) EE positions in metres) per path; the start is a dot, the end a cross.
+        obstacles: `runtime.describe_obstacle` dicts; a cylinder is drawn filled (its fitted radius) with a dashed
+            circle at its safety distance Q* (held-object extent and margin included).
+        objects: name -> (x, y[, z]) of labelled objects (e.g. target centroids).
+    """
+    plt = _pyplot()
+    from matplotlib.patches import Circle, Polygon
+
+    fig, ax = plt.subplots(figsize=(5.5, 5.0), dpi=120)
+    for index, obstacle in enumerate(obstacles):
+        label = "obstacle (fitted)" if index == 0 else None
+        if "radius" in obstacle:
+            center = obstacle["center"][:2]
+            ax.add_patch(Circle(center, obstacle["radius"], color="tab:red", alpha=0.45, label=label))
+            ax.add_patch(Circle(center, obstacle["safety_distance"], fill=False, ls="--", color="tab:red",
+                                label="safety distance Q*" if index == 0 else None))
+        elif "corners" in obstacle:
+            ax.add_patch(Polygon(np.asarray(obstacle["corners"]), color="tab:red", alpha=0.45, label=label))
+    for index, (label, positions) in enumerate(runs):
+        positions = np.asarray(positions, dtype=np.float64)
+        if positions.ndim != 2 or len(positions) == 0:
+            continue
+        color = _COLORS[index % len(_COLORS)]
+        ax.plot(positions[:, 0], positions[:, 1], "-", color=color, lw=1.6, label=label)
+        ax.plot(*positions[0, :2], "o", color=color, ms=5)
+        ax.plot(*positions[-1, :2], "x", color=color, ms=7, mew=2)
+    for name, xy in (objects or {}).items():
+        ax.plot(xy[0], xy[1], "s", color="black", ms=5)
+        ax.annotate(name, (xy[0], xy[1]), textcoords="offset points", xytext=(5, 5), fontsize=8)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title, fontsize=10)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def plot_rates(path: str | Path, conditions: Sequence[tuple[str, Mapping[str, Any]]], *,
+               title: str = "closed-loop evaluation") -> Path:
+    """Grouped bars of success, collision and safe-success rates, one group per (name, summary)."""
+    plt = _pyplot()
+    metrics = (("success_rate", "success", "tab:green"), ("collision_rate", "collision", "tab:red"),
+               ("safe_success_rate", "success without collision", "tab:blue"))
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.6 * len(conditions) + 2), 3.6), dpi=120)
+    x = np.arange(len(conditions))
+    width = 0.8 / len(metrics)
+    for offset, (key, label, color) in enumerate(metrics):
+        values = [float(summary.get(key) or 0.0) for _, summary in conditions]
+        bars = ax.bar(x + (offset - 1) * width, values, width, label=label, color=color)
+        for bar, value in zip(bars, values, strict=True):
+            ax.annotate(f"{value:.0%}", (bar.get_x() + bar.get_width() / 2, value), ha="center", va="bottom",
+                        fontsize=7)
+    ax.set_xticks(x, [name for name, _ in conditions], fontsize=8)
+    ax.set_ylim(0, 1.15)
+    ax.set_ylabel("rate over episodes")
+    ax.set_title(title, fontsize=10)
+    ax.legend(fontsize=7, ncols=3, loc="upper center")
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
+    """A GitHub-flavoured Markdown table; None cells print as a dash."""
+    def cell(value: Any) -> str:
+        if value is None:
+            return "–"
+        if isinstance(value, float):
+            return f"{value:.3g}"
+        return str(value).replace("|", "\\|")
+
+    lines = ["| " + " | ".join(headers) + " |", "|" + "|".join("---" for _ in headers) + "|"]
+    lines += ["| " + " | ".join(cell(v) for v in row) + " |" for row in rows]
+    return "\n".join(lines)
+
+
+def percent(value: float | None) -> str:
+    return "–" if value is None else f"{100 * value:.0f}%"
+
+
+def centimetres(value: float | None) -> str:
+    return "–" if value is None else f"{100 * value:.1f} cm"

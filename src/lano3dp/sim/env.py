@@ -1,0 +1,345 @@
+"""`TabletopEnv`: a gymnasium environment over the MuJoCo tabletop.
+
+Action (10,) float: absolute EE target = position (3, metres, world frame) + rotation 6D
+(6: first two columns of the EE rotation matrix) + gripper command (1: 0 open .. 1 closed).
+Each `step` moves the mocap target from the previous target to this one over the control
+period (1 / control_hz s = 50 physics steps of 2 ms at 10 Hz), so large jumps are spread out.
+
+Bad actions:
+  * NaN / inf anywhere, wrong shape, or a degenerate rotation 6D (zero or parallel columns)
+    -> `InvalidActionError` naming the problem (nothing is simulated).
+  * position outside `workspace_low .. workspace_high` -> clipped to the box; gripper outside
+    [0, 1] -> clipped. `info["action_clipped"]` is True for that step.
+
+Observation (dict): "rgb" (H, W, 3) uint8 (if render_rgb), "depth" (H, W) float32 metres
+(0 = no surface), "segmentation" (H, W) int32 body ids (-1 = sky), "state" (11,) float32
+[EE position, EE rotation 6D, gripper opening (m), grasp flag], "intrinsics" (3, 3) and
+"cam_to_world" (4, 4) float32 (OpenCV convention). `env.frame()` returns the same images as
+an `RGBDFrame` with `instance_names` and `instance_attributes` for the ground-truth segmenter.
+
+Info: "success", "is_success", "action_clipped", "obstacle_contacts" (contact events of the
+gripper or held object with obstacles during this step: dicts with obstacle, body, depth),
+"n_obstacle_contacts" (episode total), "min_obstacle_clearance" (metres, min over the step's
+checks; inf without obstacles), "held_object", "seed", "instruction", "target_phrases".
+Reward: 1.0 on success, else 0.0; `terminated` on success, `truncated` at `max_steps`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+from gymnasium import spaces
+
+from lano3dp.errors import Lano3dpError
+from lano3dp.geometry import RGBDFrame, matrix_to_rot6d
+from lano3dp.sim.experts import CONTROL_HZ, MotionPlan
+from lano3dp.sim.objects import ObjectInfo, primitives
+from lano3dp.sim.render import FusedRenderer
+from lano3dp.sim.robot import GripperHandle, GripperSpec
+from lano3dp.sim.scene import FRONT_CAMERA, SHIFTED_CAMERA, TIMESTEP, CameraPose, SceneBuilder
+from lano3dp.sim.tasks import make_task
+from lano3dp.sim.tasks.base import Layout, SimState, Task
+from lano3dp.sim.variations import SceneExtras, Variation, sample_extras
+
+WORKSPACE_LOW = np.array([0.05, -0.55, 0.0])
+WORKSPACE_HIGH = np.array([0.95, 0.55, 0.60])
+CAMERAS = {"front": FRONT_CAMERA, "shifted": SHIFTED_CAMERA}
+# Physics substeps between obstacle checks / mocap updates within one control step.
+_CHUNK = 5
+_SETTLE_STEPS = 150  # 0.3 s for objects to come to rest after building
+
+
+class InvalidActionError(Lano3dpError, ValueError):
+    """An action that cannot be executed (NaN, wrong shape, degenerate rotation)."""
+
+
+class SimulationError(Lano3dpError, RuntimeError):
+    """The physics diverged (MuJoCo reported an unstable state)."""
+
+
+@dataclass
+class EpisodeInfo:
+    seed: int
+    layout: Layout
+    extras: SceneExtras
+    variation: Variation
+
+
+class TabletopEnv(gym.Env):
+    """Gymnasium env for one task; every `reset` builds a fresh scene from the seed.
+
+    Args:
+        task: registry name ("bowl_pour") or a `Task` instance.
+        variation: "clean", axes joined by "+", an iterable of axes, or a `Variation`.
+        camera: "front" (training) or "shifted", or a `CameraPose`; the "camera" variation forces "shifted".
+        image_size: square image side in pixels (or (height, width)).
+        render_rgb: also render the colour image (depth + segmentation are always rendered).
+        control_hz: control rate; physics runs at 500 Hz.
+        max_steps: episode limit (default: the task's).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": int(CONTROL_HZ)}
+
+    def __init__(self, task: str | Task = "bowl_pour", variation=None, camera: str | CameraPose = "front",
+                 image_size: int | tuple[int, int] = 128, render_rgb: bool = True, control_hz: float = CONTROL_HZ,
+                 max_steps: int | None = None, render_mode: str | None = "rgb_array"):
+        self.task = make_task(task) if isinstance(task, str) else task
+        self.variation = Variation.parse(variation)
+        if isinstance(camera, str):
+            if camera not in CAMERAS:
+                raise ValueError(f"unknown camera {camera!r}; use one of {sorted(CAMERAS)} or a CameraPose")
+            camera = CAMERAS[camera]
+        self.camera_pose = camera
+        height, width = (image_size, image_size) if np.isscalar(image_size) else tuple(image_size)
+        self.height, self.width = int(height), int(width)
+        self.render_rgb = render_rgb
+        self.render_mode = render_mode
+        self.control_hz = float(control_hz)
+        self.substeps = int(round(1.0 / (self.control_hz * TIMESTEP)))
+        if self.substeps % _CHUNK:
+            raise ValueError(f"control_hz must give a multiple of {_CHUNK} physics steps, got {self.substeps}")
+        self.max_steps = int(max_steps or self.task.max_steps)
+        self.gripper_spec = GripperSpec()
+        self.workspace_low, self.workspace_high = WORKSPACE_LOW.copy(), WORKSPACE_HIGH.copy()
+
+        image = (self.height, self.width)
+        obs = {
+            "depth": spaces.Box(0.0, np.inf, image, np.float32),
+            "segmentation": spaces.Box(-1, np.iinfo(np.int32).max, image, np.int32),
+            "state": spaces.Box(-np.inf, np.inf, (11,), np.float32),
+            "intrinsics": spaces.Box(-np.inf, np.inf, (3, 3), np.float32),
+            "cam_to_world": spaces.Box(-np.inf, np.inf, (4, 4), np.float32),
+        }
+        if render_rgb:
+            obs["rgb"] = spaces.Box(0, 255, (*image, 3), np.uint8)
+        self.observation_space = spaces.Dict(obs)
+        low = np.concatenate([self.workspace_low, -np.ones(6), [0.0]]).astype(np.float32)
+        high = np.concatenate([self.workspace_high, np.ones(6), [1.0]]).astype(np.float32)
+        self.action_space = spaces.Box(low, high, dtype=np.float32)
+
+        self._renderer: FusedRenderer | None = None
+        self.model: mujoco.MjModel | None = None
+        self.data: mujoco.MjData | None = None
+        self.episode: EpisodeInfo | None = None
+        self._frame: RGBDFrame | None = None
+
+    # ---- episode construction -------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Build the scene of episode `seed`. options: {"variation": ...} overrides the variation."""
+        super().reset(seed=seed)
+        options = options or {}
+        variation = Variation.parse(options["variation"]) if "variation" in options else self.variation
+        episode_seed = int(seed) if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
+        rng = np.random.default_rng(episode_seed)
+        layout = self.task.sample_layout(rng, variation)
+        layout.seed = episode_seed
+        extras = sample_extras(self.task, layout, rng, variation)
+        if not variation.has("camera"):
+            extras.camera = self.camera_pose
+        self.episode = EpisodeInfo(episode_seed, layout, extras, variation)
+        self._build(layout, extras)
+        self._steps = 0
+        self._n_contacts = 0
+        self._success = False
+        self._frame = None
+        obs = self._observe()
+        return obs, self._info(clipped=False, contacts=[], clearance=self._clearance())
+
+    def _build(self, layout: Layout, extras: SceneExtras) -> None:
+        builder = SceneBuilder(extras.style, self.gripper_spec, max_image_size=max(self.height, self.width))
+        self.task.build(builder, layout)
+        for extra in extras.objects:
+            if extra.role == "obstacle":
+                primitives.add_cylinder_obstacle(builder, extra.name, extra.position, radius=extra.radius,
+                                                 height=extra.height, color=extra.color)
+            else:
+                primitives.add_object(builder, extra.kind, extra.name, extra.position, yaw=extra.yaw,
+                                      color=extra.color, scale=extra.scale, role=extra.role)
+        builder.add_camera(CameraPose("front", extras.camera.position, extras.camera.target, extras.camera.fovy))
+        self.builder = builder
+        self.objects: dict[str, ObjectInfo] = dict(builder.objects)
+        model = builder.compile()
+        data = mujoco.MjData(model)
+        self.model, self.data = model, data
+        self.gripper = GripperHandle(model, self.gripper_spec)
+        mujoco.mj_forward(model, data)
+        mujoco.mj_step(model, data, nstep=_SETTLE_STEPS)
+        self.sim = SimState(model, data, self.objects, self.gripper)
+        self._target_pos, self._target_quat = self.gripper.target(data)
+        self._body_object = np.full(model.nbody, "", dtype=object)
+        self.instance_names: dict[str, list[int]] = {}
+        for name, info in self.objects.items():
+            ids = [model.body(b).id for b in info.body_names]
+            self.instance_names[name] = ids
+            self._body_object[ids] = name
+        self.instance_attributes = {name: info.attributes() for name, info in self.objects.items()}
+        obstacle_bodies = [i for n, info in self.objects.items() if info.role == "obstacle"
+                           for i in self.instance_names[n]]
+        self._obstacle_geoms = np.flatnonzero(np.isin(model.geom_bodyid, obstacle_bodies))
+        self._robot_geoms = np.flatnonzero(np.isin(model.geom_bodyid, self.gripper.body_ids))
+        if self._renderer is None:
+            self._renderer = FusedRenderer(self.width, self.height)
+        self._renderer.set_model(model)
+
+    # ---- stepping -------------------------------------------------------------------------
+    def validate_action(self, action) -> tuple[np.ndarray, np.ndarray, float, bool]:
+        """Check and clip one action. Returns (position, quaternion wxyz, gripper, clipped)."""
+        action = np.asarray(action, dtype=np.float64)
+        if action.shape != (10,):
+            raise InvalidActionError(
+                f"action must have shape (10,) = position 3 + rotation 6D 6 + gripper 1, got {action.shape}")
+        if not np.all(np.isfinite(action)):
+            bad = [i for i in range(10) if not np.isfinite(action[i])]
+            raise InvalidActionError(f"action has NaN/inf at indices {bad}: {action.tolist()}")
+        a1, a2 = action[3:6], action[6:9]
+        n1 = np.linalg.norm(a1)
+        if n1 < 1e-6 or np.linalg.norm(np.cross(a1 / n1, a2)) < 1e-6:
+            raise InvalidActionError(f"rotation 6D {action[3:9].tolist()} is degenerate (zero or parallel columns)")
+        position = np.clip(action[:3], self.workspace_low, self.workspace_high)
+        gripper = float(np.clip(action[9], 0.0, 1.0))
+        clipped = bool(np.any(position != action[:3]) or gripper != action[9])
+        b1 = a1 / n1
+        b2 = a2 - np.dot(b1, a2) * b1
+        b2 /= np.linalg.norm(b2)
+        rotation = np.stack([b1, b2, np.cross(b1, b2)], axis=1)
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, rotation.reshape(-1))
+        return position, quat, gripper, clipped
+
+    def step(self, action):
+        if self.data is None:
+            raise RuntimeError("call reset() before step()")
+        position, quat, gripper, clipped = self.validate_action(action)
+        model, data = self.model, self.data
+        start_pos, start_quat = self._target_pos, self._target_quat
+        if np.dot(start_quat, quat) < 0:
+            quat = -quat
+        chunks = self.substeps // _CHUNK
+        contacts, clearance = [], np.inf
+        for k in range(1, chunks + 1):
+            s = k / chunks
+            blended = (1 - s) * start_quat + s * quat  # nlerp: the per-chunk angle is small
+            self.gripper.command(data, start_pos + s * (position - start_pos), blended / np.linalg.norm(blended),
+                                 gripper)
+            mujoco.mj_step(model, data, nstep=_CHUNK)
+            if len(self._obstacle_geoms):
+                contacts.extend(self._obstacle_contacts())
+        if not np.all(np.isfinite(data.qacc)) or data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0:
+            raise SimulationError(f"physics became unstable at step {self._steps} (seed {self.episode.seed})")
+        if len(self._obstacle_geoms):
+            clearance = self._clearance()
+        self._target_pos, self._target_quat = position, quat
+        self._steps += 1
+        self._n_contacts += len(contacts)
+        self._success = bool(self.task.is_success(self.sim, self.episode.layout))
+        self._frame = None
+        obs = self._observe()
+        truncated = self._steps >= self.max_steps and not self._success
+        return obs, float(self._success), self._success, truncated, self._info(clipped, contacts, clearance)
+
+    def _obstacle_contacts(self) -> list[dict]:
+        data, model = self.data, self.model
+        ncon = data.ncon
+        if ncon == 0:
+            return []
+        g1, g2 = data.contact.geom1[:ncon], data.contact.geom2[:ncon]
+        movers = self._mover_geoms()
+        hits = (np.isin(g1, self._obstacle_geoms) & np.isin(g2, movers)) | (
+            np.isin(g2, self._obstacle_geoms) & np.isin(g1, movers))
+        events = []
+        for i in np.flatnonzero(hits):
+            a, b = (g1[i], g2[i]) if g1[i] in self._obstacle_geoms else (g2[i], g1[i])
+            events.append({"step": self._steps, "obstacle": self._body_object[model.geom_bodyid[a]],
+                           "body": model.body(model.geom_bodyid[b]).name, "depth": float(-data.contact.dist[i])})
+        return events
+
+    def _mover_geoms(self) -> np.ndarray:
+        held = self.gripper.held_body(self.data)
+        if held < 0:
+            return self._robot_geoms
+        return np.concatenate([self._robot_geoms, np.flatnonzero(self.model.geom_bodyid == held)])
+
+    def _clearance(self) -> float:
+        """Smallest distance (m) between obstacle geoms and the gripper or held object; inf if none."""
+        if self.model is None or not len(self._obstacle_geoms):
+            return float(np.inf)
+        best = np.inf
+        fromto = np.zeros(6)
+        for movable in self._mover_geoms():
+            for obstacle in self._obstacle_geoms:
+                best = min(best, mujoco.mj_geomDistance(self.model, self.data, int(movable), int(obstacle), 0.5,
+                                                        fromto))
+        return float(best)
+
+    # ---- observations ---------------------------------------------------------------------
+    def state(self) -> np.ndarray:
+        """(11,) float32: EE position (3), EE rotation 6D (6), gripper opening (m), grasp flag."""
+        position, rotation = self.gripper.ee_pose(self.data)
+        grasped = float(self.gripper.held_body(self.data) >= 0)
+        return np.concatenate([position, matrix_to_rot6d(rotation), [self.gripper.opening(self.data), grasped]]
+                              ).astype(np.float32)
+
+    def _observe(self) -> dict:
+        images = self._renderer.render(self.data, "front", rgb=self.render_rgb)
+        self._images = images
+        obs = {
+            "depth": images.depth,
+            "segmentation": images.body_ids,
+            "state": self.state(),
+            "intrinsics": images.camera.K.astype(np.float32),
+            "cam_to_world": images.camera.cam_to_world.astype(np.float32),
+        }
+        if self.render_rgb:
+            obs["rgb"] = images.rgb
+        return obs
+
+    def frame(self) -> RGBDFrame:
+        """The current camera images as an `RGBDFrame` with ground-truth instance names and attributes."""
+        if self._frame is None:
+            images = self._images
+            rgb = images.rgb if images.rgb is not None else np.zeros((self.height, self.width, 3), np.uint8)
+            self._frame = RGBDFrame(rgb=rgb, depth=images.depth, camera=images.camera,
+                                    segmentation=images.body_ids, instance_names=self.instance_names,
+                                    instance_attributes=self.instance_attributes,
+                                    timestamp=self._steps / self.control_hz)
+        return self._frame
+
+    @property
+    def camera(self):
+        """The observation camera (PinholeCamera) of the current episode."""
+        return self._images.camera
+
+    def _info(self, clipped: bool, contacts: list, clearance: float) -> dict:
+        layout = self.episode.layout
+        return {
+            "success": self._success,
+            "is_success": self._success,
+            "action_clipped": clipped,
+            "obstacle_contacts": contacts,
+            "n_obstacle_contacts": self._n_contacts,
+            "min_obstacle_clearance": clearance,
+            "held_object": self.sim.held_object(),
+            "seed": self.episode.seed,
+            "variation": self.episode.variation.name,
+            "instruction": self.task.instruction_text(layout),
+            "target_phrases": self.task.target_phrases(layout),
+            "slot_objects": {slot: layout.names.get(slot, slot) for slot in self.task.object_slots},
+        }
+
+    # ---- experts and rendering ------------------------------------------------------------
+    def expert_plan(self) -> MotionPlan:
+        """The task's scripted expert for the current episode (privileged: reads the true scene)."""
+        return self.task.plan_expert(self.sim, self.episode.layout)
+
+    def render(self):
+        if self._images.rgb is not None:
+            return self._images.rgb
+        return self._renderer.render(self.data, "front", rgb=True).rgb
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,43 @@
+"""What a simulator or a real robot must provide to stand in for `TabletopEnv`.
+
+The evaluation and runtime layers only use this surface, so a user's own simulator or robot
+plugs in by implementing it (structural typing: no inheritance needed).
+
+    obs, info = env.reset(seed=0)
+    frame = env.frame()                         # RGBDFrame: rgb, depth, calibrated camera
+    state = obs["state"]                        # (11,) EE position, rotation 6D, opening (m), grasp flag
+    obs, reward, terminated, truncated, info = env.step(action)   # action (10,) absolute EE pose + gripper
+
+Real robots without ground-truth segmentation leave `frame.segmentation` None and use an
+open-vocabulary segmenter; `info` should carry "success" when the robot can tell (else False).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from lano3dp.geometry import RGBDFrame
+
+
+@runtime_checkable
+class SimulatorProtocol(Protocol):
+    """Gymnasium-style control loop over absolute end-effector actions (see the module docstring)."""
+
+    control_hz: float
+    max_steps: int
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict[str, Any], dict]:
+        """Start an episode; obs holds at least "state" (11,) float32."""
+        ...
+
+    def step(self, action: np.ndarray) -> tuple[dict[str, Any], float, bool, bool, dict]:
+        """Execute one (10,) action: position (3, m), rotation 6D (6), gripper (1, 0 open .. 1 closed)."""
+        ...
+
+    def frame(self) -> RGBDFrame:
+        """The latest camera frame with intrinsics and camera-to-world extrinsics."""
+        ...
+
+    def close(self) -> None: ...

@@ -1,0 +1,168 @@
+"""Task base class: what every tabletop task defines.
+
+A task is a class with
+
+    name            registry key, e.g. "bowl_pour"
+    skill           the skill word the language layer picks, e.g. "pour"
+    object_slots    ordered slot words the policy is trained on, e.g. ("bowl", "pan"); the
+                    dataset's `object_clouds` are in this order
+    instruction     a template over the slots, e.g. "pour the contents of the {bowl} into the {pan}"
+    max_steps       episode limit at 10 Hz control
+    similar_slots   slots whose kind gets look-alike instances under the "similar" variation
+
+and implements
+
+    sample_layout(rng, variation) -> Layout
+        Object placements from a seeded `np.random.Generator` (never global state). Slot
+        objects are keyed by their slot word in `layout.objects`; other task objects (e.g.
+        the bowl's items) by any other key. Honour `variation.has("instance")` (sizes/shapes)
+        and "similar" (use `layout.name_for(slot)` style names, see `Layout.set_names`).
+    build(builder, layout) -> None
+        Add the objects to the `SceneBuilder` (see `sim/scene.py`, `sim/objects/primitives.py`),
+        naming each slot object `layout.names[slot]`.
+    plan_expert(sim, layout) -> MotionPlan
+        The scripted expert as a `MotionPlan` (sim/experts.py), from the settled scene.
+    is_success(sim, layout) -> bool
+        Success check on the simulator state (`SimState` below).
+    nominal_path(layout) -> (M, 3)   [default: plan_expert(None, layout).path()]
+        The expert's EE waypoints, used to keep distractors off the path.
+    obstacle_region(layout) -> (M, 3)  [default: the path's transport part]
+        Polyline near which "obstacle" cylinders are placed.
+
+`plan_expert` gets `sim=None` when only the path is needed (before the scene exists), so
+plan from the layout and use `sim` only for refinements. The registry is in
+`tasks/__init__.py`.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import mujoco
+import numpy as np
+
+from lano3dp.sim.experts import MotionPlan
+from lano3dp.sim.objects import ObjectInfo, object_of_body
+from lano3dp.sim.robot import GripperHandle
+from lano3dp.sim.variations import Variation
+
+
+@dataclass
+class Placement:
+    """Where and how one task object is placed. position: (3,) metres; yaw: rad about +z."""
+
+    kind: str
+    position: np.ndarray
+    yaw: float = 0.0
+    color: str = "red"
+    scale: float = 1.0
+    radius: float = 0.05  # footprint radius on the table, metres (already scaled)
+    params: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass
+class Layout:
+    """One episode's task layout. `objects` maps slot words (and auxiliary keys) to placements;
+    `names` maps each slot to the scene object name (the slot word, or "<color>_<kind>" under
+    the "similar" variation); `params` holds task-specific extras."""
+
+    seed: int
+    objects: dict[str, Placement]
+    names: dict[str, str] = field(default_factory=dict)
+    params: dict[str, Any] = field(default_factory=dict)
+
+    def footprints(self) -> list[tuple[np.ndarray, float]]:
+        return [(np.asarray(p.position[:2], float), p.radius) for p in self.objects.values()]
+
+    def set_names(self, slots, variation: Variation) -> None:
+        """Slot object names: the slot word, or "<color>_<kind>" when look-alikes share the scene."""
+        for slot in slots:
+            placement = self.objects[slot]
+            self.names[slot] = f"{placement.color}_{placement.kind}" if variation.has("similar") else slot
+
+
+class SimState:
+    """Read access to a running scene for success checks and experts."""
+
+    def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, objects: dict[str, ObjectInfo],
+                 gripper: GripperHandle):
+        self.model, self.data, self.objects, self.gripper = model, data, objects, gripper
+
+    def body_position(self, name: str) -> np.ndarray:
+        return self.data.xpos[self._body(name)].copy()
+
+    def body_rotation(self, name: str) -> np.ndarray:
+        return self.data.xmat[self._body(name)].reshape(3, 3).copy()
+
+    def body_velocity(self, name: str) -> np.ndarray:
+        """(6,) [angular, linear] velocity of a body in the world frame."""
+        velocity = np.zeros(6)
+        mujoco.mj_objectVelocity(self.model, self.data, mujoco.mjtObj.mjOBJ_BODY, self._body(name), velocity, 0)
+        return velocity
+
+    def geom_position(self, name: str) -> np.ndarray:
+        return self.data.geom_xpos[self.model.geom(name).id].copy()
+
+    def joint_qpos(self, name: str) -> float:
+        return float(self.data.qpos[self.model.joint(name).qposadr[0]])
+
+    def held_object(self) -> str | None:
+        """Name of the object held between the fingers, or None."""
+        body = self.gripper.held_body(self.data)
+        return None if body < 0 else object_of_body(self.model.body(body).name)
+
+    def ee_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.gripper.ee_pose(self.data)
+
+    def _body(self, name: str) -> int:
+        try:
+            return self.model.body(name).id
+        except KeyError:
+            raise KeyError(f"no body named {name!r} in the scene; objects: {sorted(self.objects)}") from None
+
+
+class Task(ABC):
+    """Base class of every tabletop task; see the module docstring for the contract."""
+
+    name: ClassVar[str]
+    skill: ClassVar[str]
+    object_slots: ClassVar[tuple[str, ...]]
+    instruction: ClassVar[str]
+    max_steps: ClassVar[int] = 200
+    similar_slots: ClassVar[tuple[str, ...]] = ()
+
+    @abstractmethod
+    def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout: ...
+
+    @abstractmethod
+    def build(self, builder, layout: Layout) -> None: ...
+
+    @abstractmethod
+    def plan_expert(self, sim: SimState | None, layout: Layout) -> MotionPlan: ...
+
+    @abstractmethod
+    def is_success(self, sim: SimState, layout: Layout) -> bool: ...
+
+    def nominal_path(self, layout: Layout) -> np.ndarray:
+        return self.plan_expert(None, layout).path()
+
+    def obstacle_region(self, layout: Layout) -> np.ndarray:
+        """Default: the path's waypoints above 8 cm (the transport phase), else the whole path."""
+        path = self.nominal_path(layout)
+        high = path[path[:, 2] > 0.08]
+        return high if len(high) >= 2 else path
+
+    def instruction_text(self, layout: Layout) -> str:
+        """The instruction with each slot replaced by the phrase naming this episode's target."""
+        return self.instruction.format(**self.target_phrases(layout))
+
+    def target_phrases(self, layout: Layout) -> dict[str, str]:
+        """Slot -> phrase naming the target in this scene ("bowl", or "blue bowl" among look-alikes)."""
+        return {slot: layout.names.get(slot, slot).replace("_", " ") for slot in self.object_slots}
+
+    @staticmethod
+    def instance_scale(rng: np.random.Generator, variation: Variation) -> float:
+        """1.0, or under "instance" a small (0.8) or large (1.2) variant."""
+        return float(rng.choice([0.8, 1.2])) if variation.has("instance") else 1.0

@@ -1,0 +1,150 @@
+"""bowl_pour: grasp a bowl holding a few small items and pour them into a pan.
+
+Layout: the bowl on the robot's left (y in [0.08, 0.22]), the pan on its right (y in
+[-0.25, -0.11]), x in [0.36, 0.56], centres at least 0.30 m apart; 3 items (spheres or
+cubes, 10 g) sit in the bowl's half that faces the pan. Instance variation: bowl and pan
+scaled 0.8 / 1.2 and recoloured.
+
+Expert: grasp the bowl wall on the side away from the pan (top-down, fingers straddling the
+wall, opened only part-way so the inner finger clears the items), lift to 0.22 m, carry the
+bowl until its far lip is over the pan, tilt it 150 degrees about the horizontal axis
+tangent to the grasped wall, hold, tilt back.
+
+Success: every item rests inside the pan (xy within the pan's inner radius, below its rim
+plus 2 cm, speed under 5 cm/s).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lano3dp.sim.experts import CLOSED, MotionPlan
+from lano3dp.sim.objects import primitives
+from lano3dp.sim.objects.primitives import BOWL_HEIGHT, BOWL_RADIUS, BOWL_WALLS, PAN_RADIUS, PAN_WALL_HEIGHT
+from lano3dp.sim.robot import HOME_POSITION, rot_axis, top_down
+from lano3dp.sim.tasks import register_task
+from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.variations import Variation
+
+CARRY_HEIGHT = 0.24
+TILT = np.deg2rad(150.0)
+GRASP_DEPTH = 0.022  # TCP below the rim: the pads cover the upper ~3 cm of the wall
+PREGRASP_GRIP = 0.6  # partly closed: ~3.5 cm between the fingers, enough for the 8 mm wall
+ITEM_COLORS = ("yellow", "orange", "red", "green", "purple")
+
+
+@register_task
+class BowlPour(Task):
+    name = "bowl_pour"
+    skill = "pour"
+    object_slots = ("bowl", "pan")
+    instruction = "pour the contents of the {bowl} into the {pan}"
+    max_steps = 220
+    similar_slots = ("bowl",)
+    n_items = 3
+
+    def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
+        instance = variation.has("instance")
+        bowl_scale, pan_scale = self.instance_scale(rng, variation), self.instance_scale(rng, variation)
+        bowl_color = str(rng.choice(["white", "cyan", "pink"])) if instance else "blue"
+        pan_color = str(rng.choice(["grey", "brown", "red"])) if instance else "black"
+        while True:
+            bowl_xy = rng.uniform([0.36, 0.08], [0.56, 0.22])
+            pan_xy = rng.uniform([0.36, -0.25], [0.56, -0.11])
+            if np.linalg.norm(bowl_xy - pan_xy) >= 0.30:
+                break
+        bowl_yaw = float(rng.uniform(0, 2 * np.pi / BOWL_WALLS))
+        pan_yaw = float(np.pi / 2 + rng.uniform(-0.4, 0.4))  # handle pointing away from the bowl
+        objects = {
+            "bowl": Placement("bowl", np.array([*bowl_xy, 0.0]), bowl_yaw, bowl_color, bowl_scale,
+                              primitives.FOOTPRINTS["bowl"] * bowl_scale),
+            "pan": Placement("pan", np.array([*pan_xy, 0.0]), pan_yaw, pan_color, pan_scale,
+                             primitives.FOOTPRINTS["pan"] * pan_scale + 0.06),  # + handle
+        }
+        # Items in the bowl half that faces the pan, clear of the inner finger.
+        towards_pan = (pan_xy - bowl_xy) / np.linalg.norm(pan_xy - bowl_xy)
+        centre = bowl_xy + towards_pan * 0.012 * bowl_scale
+        start_angle = rng.uniform(0, 2 * np.pi)
+        for i in range(self.n_items):
+            angle = start_angle + 2 * np.pi * i / self.n_items
+            xy = centre + 0.0135 * np.array([np.cos(angle), np.sin(angle)])
+            shape = str(rng.choice(["sphere", "cube"]))
+            objects[f"item{i}"] = Placement("item", np.array([*xy, 0.008 + 0.012]), 0.0,
+                                            str(rng.choice(ITEM_COLORS)), 1.0, 0.0, {"shape": shape})
+        layout = Layout(seed=0, objects=objects)
+        layout.set_names(self.object_slots, variation)
+        return layout
+
+    def build(self, builder, layout: Layout) -> None:
+        bowl, pan = layout.objects["bowl"], layout.objects["pan"]
+        primitives.add_bowl(builder, layout.names["bowl"], bowl.position, bowl.yaw, bowl.color, bowl.scale)
+        primitives.add_pan(builder, layout.names["pan"], pan.position, pan.yaw, pan.color, pan.scale)
+        for key, item in layout.objects.items():
+            if item.kind == "item":
+                primitives.add_item(builder, key, item.position, item.params["shape"], item.color)
+
+    # ---- expert ----------------------------------------------------------------------------
+    def grasp_frame(self, layout: Layout, bowl_xy=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Grasp position (3,), EE rotation (3, 3) and the outward wall direction u (3,)."""
+        bowl, pan = layout.objects["bowl"], layout.objects["pan"]
+        bowl_xy = bowl.position[:2] if bowl_xy is None else bowl_xy
+        away = bowl_xy - pan.position[:2]
+        desired = np.arctan2(away[1], away[0])
+        step = 2 * np.pi / BOWL_WALLS
+        wall_angle = bowl.yaw + step * np.round((desired - bowl.yaw) / step)
+        u = np.array([np.cos(wall_angle), np.sin(wall_angle), 0.0])
+        radius, height = BOWL_RADIUS * bowl.scale, BOWL_HEIGHT * bowl.scale
+        position = np.array([*(bowl_xy + radius * u[:2]), height - GRASP_DEPTH])
+        # EE y (finger axis) along u: top_down(yaw)[:, 1] = (sin yaw, -cos yaw, 0).
+        rotation = top_down(np.arctan2(u[0], -u[1]))
+        return position, rotation, u
+
+    def plan_expert(self, sim: SimState | None, layout: Layout) -> MotionPlan:
+        bowl_xy = None if sim is None else sim.body_position(layout.names["bowl"])[:2]
+        grasp, rotation, u = self.grasp_frame(layout, bowl_xy)
+        pan = layout.objects["pan"]
+        radius = BOWL_RADIUS * layout.objects["bowl"].scale
+        axis = np.cross(u, [0.0, 0.0, 1.0])  # tilting about it lowers the far (pan-side) lip
+        tilt = rot_axis(axis, TILT)
+        lip = -2 * radius * u + np.array([0, 0, 0.012])  # far lip relative to the TCP
+        lip_target = np.array([*pan.position[:2], PAN_WALL_HEIGHT + 0.05]) + 0.03 * u
+        pour_tcp = lip_target - tilt @ lip
+        carry = np.array([*pour_tcp[:2], max(CARRY_HEIGHT, pour_tcp[2])])
+
+        plan = MotionPlan(HOME_POSITION, top_down())
+        plan.move_to(grasp + np.array([0, 0, 0.10]), rotation, gripper=PREGRASP_GRIP)
+        plan.move_to(grasp, speed=0.15)
+        plan.hold(6, gripper=CLOSED)
+        plan.move_to(np.array([*grasp[:2], CARRY_HEIGHT]), speed=0.15)
+        plan.move_to(carry, speed=0.2)
+        plan.move_to(pour_tcp, tilt @ rotation)
+        plan.hold(12)
+        plan.move_to(carry, rotation)
+        plan.hold(10)
+        return plan
+
+    def obstacle_region(self, layout: Layout) -> np.ndarray:
+        """The transport segment: from above the grasp to above the pour point."""
+        path = self.nominal_path(layout)
+        return path[3:5]
+
+    # ---- success ---------------------------------------------------------------------------
+    def is_success(self, sim: SimState, layout: Layout) -> bool:
+        pan, bowl = layout.objects["pan"], layout.objects["bowl"]
+        pan_xy = sim.body_position(layout.names["pan"])[:2]
+        bowl_position = sim.body_position(layout.names["bowl"])
+        bowl_rotation = sim.body_rotation(layout.names["bowl"])
+        inner = PAN_RADIUS * pan.scale  # the walls keep resting items inside; z below the rim confirms it
+        for key, item in layout.objects.items():
+            if item.kind != "item":
+                continue
+            position = sim.body_position(key)
+            if np.linalg.norm(position[:2] - pan_xy) > inner or position[2] > PAN_WALL_HEIGHT + 0.02:
+                return False
+            # Still inside the bowl (e.g. the bowl was dropped into the pan) does not count.
+            local = bowl_rotation.T @ (position - bowl_position)
+            if np.linalg.norm(local[:2]) < BOWL_RADIUS * bowl.scale and -0.01 < local[2] < BOWL_HEIGHT * bowl.scale:
+                return False
+            if np.linalg.norm(sim.body_velocity(key)[3:]) > 0.05:
+                return False
+        return True

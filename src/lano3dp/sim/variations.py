@@ -1,0 +1,223 @@
+"""Generalisation axes, selectable per episode and combinable.
+
+    clean       the training distribution: only the task's objects, default colours and camera
+    clutter     distractor objects of other kinds on the table
+    similar     extra instances of the target kinds in other colours; targets are then named by colour
+                ("blue_bowl") and the instruction phrase says the colour ("blue bowl")
+    instance    size / shape variants of the task objects (scale 0.8 "small" or 1.2 "large", other colours)
+    camera      the shifted camera pose (never used for training data)
+    background  table, floor and sky colours and a checker table texture
+    obstacle    static cylinders standing on or near the expert's path (never in training data)
+
+`Variation.parse("clutter+camera")` (also "," separated, or an iterable of names) builds one.
+Extras (distractors, similar instances, obstacles, style) are sampled here from the episode's
+generator after the task's own layout, avoiding the task objects' footprints and, for
+distractors, the expert's path corridor, so a variation never makes the expert's task impossible
+(obstacles excepted: they are meant to be in the way).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lano3dp.errors import Lano3dpError
+from lano3dp.sim.objects import PALETTE
+from lano3dp.sim.objects.primitives import FOOTPRINTS
+from lano3dp.sim.scene import FRONT_CAMERA, SHIFTED_CAMERA, CameraPose, SceneStyle
+
+VARIATION_AXES = ("clutter", "similar", "instance", "camera", "background", "obstacle")
+DISTRACTOR_KINDS = ("mug", "cube", "plate", "can", "ball", "bowl", "bottle")
+# Where loose objects may be placed (x, y), metres, world frame; all of it is in the front camera's view.
+PLACEMENT_LOW = np.array([0.22, -0.36])
+PLACEMENT_HIGH = np.array([0.70, 0.36])
+
+
+class VariationError(Lano3dpError, ValueError):
+    """An unknown variation axis was asked for."""
+
+
+@dataclass(frozen=True)
+class Variation:
+    """A set of variation axes plus how many extra objects each adds."""
+
+    axes: frozenset[str] = frozenset()
+    n_distractors: tuple[int, int] = (2, 4)  # inclusive range
+    n_similar: int = 2
+    n_obstacles: int = 1
+
+    def __post_init__(self):
+        unknown = set(self.axes) - set(VARIATION_AXES)
+        if unknown:
+            raise VariationError(f"unknown variation axes {sorted(unknown)}; known: clean, {', '.join(VARIATION_AXES)}")
+        object.__setattr__(self, "axes", frozenset(self.axes))
+
+    @classmethod
+    def parse(cls, value: str | Iterable[str] | Variation | None) -> Variation:
+        if isinstance(value, Variation):
+            return value
+        if value is None:
+            return cls()
+        if isinstance(value, str):
+            value = value.replace(",", "+").split("+")
+        names = {v.strip().lower() for v in value if v.strip()} - {"clean", "none"}
+        return cls(frozenset(names))
+
+    def has(self, axis: str) -> bool:
+        if axis not in VARIATION_AXES:
+            raise VariationError(f"unknown variation axis {axis!r}; known: {', '.join(VARIATION_AXES)}")
+        return axis in self.axes
+
+    @property
+    def name(self) -> str:
+        return "+".join(a for a in VARIATION_AXES if a in self.axes) or "clean"
+
+    def __str__(self) -> str:
+        return self.name
+
+
+@dataclass
+class ExtraObject:
+    """An object a variation adds: built with `primitives.add_object` (or as an obstacle cylinder)."""
+
+    name: str
+    kind: str
+    position: np.ndarray
+    yaw: float
+    color: str
+    scale: float = 1.0
+    role: str = "distractor"
+    radius: float = 0.03  # obstacles: cylinder radius
+    height: float = 0.3   # obstacles: cylinder height
+
+
+@dataclass
+class SceneExtras:
+    style: SceneStyle = field(default_factory=SceneStyle)
+    camera: CameraPose = FRONT_CAMERA
+    objects: list[ExtraObject] = field(default_factory=list)
+
+
+# ---- placement ------------------------------------------------------------------------------
+def distance_to_polyline(point_xy: np.ndarray, path_xy: np.ndarray) -> float:
+    """Smallest distance from a point (2,) to a polyline (M, 2), metres."""
+    if len(path_xy) == 1:
+        return float(np.linalg.norm(point_xy - path_xy[0]))
+    a, b = path_xy[:-1], path_xy[1:]
+    ab = b - a
+    t = np.clip(np.einsum("ij,ij->i", point_xy - a, ab) / np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12), 0, 1)
+    closest = a + t[:, None] * ab
+    return float(np.min(np.linalg.norm(point_xy - closest, axis=1)))
+
+
+def sample_free_xy(rng: np.random.Generator, footprints: list[tuple[np.ndarray, float]], radius: float,
+                   low=PLACEMENT_LOW, high=PLACEMENT_HIGH, corridor: np.ndarray | None = None,
+                   corridor_width: float = 0.0, margin: float = 0.01, tries: int = 200) -> np.ndarray | None:
+    """Rejection-sample an (x, y) whose disc of `radius` clears every footprint disc (and the corridor).
+
+    Returns None when no free spot was found in `tries` draws (the caller skips that object).
+    """
+    low, high = np.asarray(low, float) + radius, np.asarray(high, float) - radius
+    for _ in range(tries):
+        xy = rng.uniform(low, high)
+        if any(np.linalg.norm(xy - c) < r + radius + margin for c, r in footprints):
+            continue
+        if corridor is not None and distance_to_polyline(xy, corridor) < corridor_width + radius:
+            continue
+        return xy
+    return None
+
+
+# ---- background -----------------------------------------------------------------------------
+_TABLE_COLOURS = [(0.30, 0.45, 0.62), (0.78, 0.78, 0.74), (0.25, 0.25, 0.27), (0.55, 0.65, 0.45), (0.72, 0.36, 0.30)]
+_FLOOR_COLOURS = [(0.6, 0.55, 0.45), (0.2, 0.3, 0.25), (0.75, 0.75, 0.8), (0.3, 0.2, 0.2)]
+_SKIES = [((0.9, 0.8, 0.6), (0.4, 0.3, 0.2)), ((0.3, 0.3, 0.35), (0.05, 0.05, 0.08)),
+          ((0.6, 0.85, 0.6), (0.1, 0.3, 0.1))]
+
+
+def sample_style(rng: np.random.Generator) -> SceneStyle:
+    table = _TABLE_COLOURS[rng.integers(len(_TABLE_COLOURS))]
+    checker = None
+    if rng.random() < 0.5:
+        checker = tuple(float(c) for c in np.clip(np.array(table) * rng.uniform(0.5, 0.8), 0, 1)) + (1.0,)
+    return SceneStyle(
+        table_rgba=(*table, 1.0),
+        table_texture_rgba=checker,
+        floor_rgba=(*_FLOOR_COLOURS[rng.integers(len(_FLOOR_COLOURS))], 1.0),
+        sky_rgb=_SKIES[rng.integers(len(_SKIES))],
+        light_diffuse=float(rng.uniform(0.5, 0.9)),
+    )
+
+
+def other_colors(exclude: Iterable[str]) -> list[str]:
+    exclude = set(exclude)
+    return [c for c in PALETTE if c not in exclude]
+
+
+def sample_extras(task, layout, rng: np.random.Generator, variation: Variation) -> SceneExtras:
+    """Everything the variation adds on top of the task layout. `task` is a `tasks.base.Task`."""
+    extras = SceneExtras()
+    if variation.has("background"):
+        extras.style = sample_style(rng)
+    if variation.has("camera"):
+        extras.camera = SHIFTED_CAMERA
+    footprints = layout.footprints()
+    path = task.nominal_path(layout)
+    corridor = path[:, :2]
+    used_colors = {p.color for p in layout.objects.values()}
+    if variation.has("similar"):
+        for slot in task.similar_slots:
+            target = layout.objects[slot]
+            colors = other_colors(used_colors | {"black", "grey"})
+            rng.shuffle(colors)
+            radius = FOOTPRINTS.get(target.kind, target.radius / max(target.scale, 1e-6)) * target.scale
+            for color in colors[: variation.n_similar]:
+                xy = sample_free_xy(rng, footprints, radius, corridor=corridor, corridor_width=0.05)
+                if xy is None:
+                    continue
+                used_colors.add(color)
+                footprints.append((xy, radius))
+                extras.objects.append(ExtraObject(f"{color}_{target.kind}", target.kind, xy,
+                                                  float(rng.uniform(-np.pi, np.pi)), color, target.scale, "similar"))
+    if variation.has("clutter"):
+        task_kinds = {p.kind for p in layout.objects.values()}
+        kinds = [k for k in DISTRACTOR_KINDS if k not in task_kinds]
+        count = int(rng.integers(variation.n_distractors[0], variation.n_distractors[1] + 1))
+        for i in range(count):
+            kind = kinds[rng.integers(len(kinds))]
+            radius = FOOTPRINTS[kind]
+            xy = sample_free_xy(rng, footprints, radius, corridor=corridor, corridor_width=0.05)
+            if xy is None:
+                continue
+            footprints.append((xy, radius))
+            color = other_colors(used_colors)[rng.integers(len(other_colors(used_colors)))]
+            extras.objects.append(ExtraObject(f"distractor_{kind}_{i}", kind, xy, float(rng.uniform(-np.pi, np.pi)),
+                                              color, 1.0, "distractor"))
+    if variation.has("obstacle"):
+        extras.objects.extend(sample_obstacles(task, layout, rng, variation.n_obstacles, footprints))
+    return extras
+
+
+def sample_obstacles(task, layout, rng: np.random.Generator, count: int,
+                     footprints: list[tuple[np.ndarray, float]]) -> list[ExtraObject]:
+    """Cylinders centred within 2 cm of the expert's transport path, clear of every object footprint."""
+    region = task.obstacle_region(layout)
+    obstacles = []
+    for i in range(count):
+        for _ in range(200):
+            radius = float(rng.uniform(0.025, 0.04))
+            segment = rng.integers(len(region) - 1) if len(region) > 1 else 0
+            a, b = region[segment, :2], region[min(segment + 1, len(region) - 1), :2]
+            xy = a + rng.uniform(0.2, 0.8) * (b - a)
+            direction = b - a
+            normal = np.array([-direction[1], direction[0]]) / max(np.linalg.norm(direction), 1e-9)
+            xy = xy + normal * rng.uniform(-0.02, 0.02)
+            if any(np.linalg.norm(xy - c) < r + radius + 0.015 for c, r in footprints):
+                continue
+            footprints.append((xy, radius))
+            obstacles.append(ExtraObject(f"obstacle_{i}", "cylinder", xy, 0.0, "grey", 1.0, "obstacle",
+                                         radius=radius, height=float(rng.uniform(0.3, 0.4))))
+            break
+    return obstacles

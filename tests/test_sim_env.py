@@ -1,0 +1,79 @@
+"""TabletopEnv contract: experts succeed, bad actions are rejected or clipped, random actions never crash."""
+
+import numpy as np
+import pytest
+
+from lano3dp.sim.env import InvalidActionError, TabletopEnv
+from lano3dp.sim.protocol import SimulatorProtocol
+
+
+@pytest.fixture(scope="module")
+def env():
+    environment = TabletopEnv("bowl_pour", image_size=64)
+    yield environment
+    environment.close()
+
+
+def run_expert(env, seed):
+    env.reset(seed=seed)
+    actions = env.expert_plan().actions()
+    info = {}
+    for t in range(env.max_steps):
+        _, reward, terminated, truncated, info = env.step(actions[min(t, len(actions) - 1)])
+        if terminated or truncated:
+            break
+    return info["success"], reward
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_bowl_pour_expert_succeeds(env, seed):
+    success, reward = run_expert(env, seed)
+    assert success and reward == 1.0
+
+
+def test_observation_matches_declared_space(env):
+    obs, info = env.reset(seed=3)
+    assert env.observation_space.contains(obs)
+    assert obs["state"].shape == (11,)
+    assert info["instruction"] == "pour the contents of the bowl into the pan"
+    np.testing.assert_allclose(obs["state"][:3], [0.30, 0.0, 0.30], atol=0.01)  # home pose
+    assert obs["state"][10] == 0.0  # nothing held
+
+
+def test_nan_action_raises_naming_the_index(env):
+    env.reset(seed=0)
+    action = env.expert_plan().actions()[0].copy()
+    action[4] = np.nan
+    with pytest.raises(InvalidActionError, match=r"indices \[4\]"):
+        env.step(action)
+
+
+def test_degenerate_rotation_raises(env):
+    env.reset(seed=0)
+    action = np.array([0.4, 0, 0.2, 1, 0, 0, 2, 0, 0, 0.0])
+    with pytest.raises(InvalidActionError, match="degenerate"):
+        env.step(action)
+
+
+def test_far_away_target_is_clipped_to_the_workspace(env):
+    env.reset(seed=0)
+    action = np.array([5.0, -5.0, 3.0, 1, 0, 0, 0, -1, 0, 2.0])
+    for _ in range(8):
+        obs, _, _, _, info = env.step(action)
+    assert info["action_clipped"]
+    np.testing.assert_allclose(obs["state"][:3], [env.workspace_high[0], env.workspace_low[1], env.workspace_high[2]],
+                               atol=0.02)
+
+
+def test_random_actions_never_crash(env):
+    rng = np.random.default_rng(0)
+    env.reset(seed=5)
+    for _ in range(40):
+        action = rng.normal(size=10) * np.array([0.5, 0.5, 0.5, 1, 1, 1, 1, 1, 1, 1]) + [0.45, 0, 0.2, 0, 0, 0, 0, 0,
+                                                                                         0, 0.5]
+        obs, *_ = env.step(action)
+        assert np.all(np.isfinite(obs["state"]))
+
+
+def test_env_meets_the_simulator_protocol(env):
+    assert isinstance(env, SimulatorProtocol)

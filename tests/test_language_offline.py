@@ -72,6 +72,16 @@ def test_avoid_it_refers_to_the_object_named_before(decomposer):
     assert plan.target_phrases == ["bowl", "pan"] and plan.obstacle_phrases == ["kettle"]
 
 
+def test_in_the_way_possessives_and_numerals(decomposer):
+    plan = decomposer.decompose("Pour the bowl into the pan; the mug is in the way")
+    assert plan.target_phrases == ["bowl", "pan"] and plan.obstacle_phrases == ["mug"]
+    plan = decomposer.decompose("Could you put the block in the drawer? There's a lamp in the way.")
+    assert plan.skill == "put_item_in_drawer" and plan.obstacle_phrases == ["lamp"]
+    plan = decomposer.decompose("Move the bowl's contents into the pan without spilling")
+    assert plan.skill == "bowl_pour" and plan.target_phrases == ["bowl", "pan"] and plan.obstacles == []
+    assert decomposer.decompose("pour the bowl into the pan and avoid the two cups").obstacle_phrases == ["cup"]
+
+
 def test_implied_objects_take_the_slot_word(decomposer):
     assert decomposer.decompose("Water the plant").target_phrases == ["watering can", "plant"]
     assert decomposer.decompose("Sweep the crumbs into the dustpan").target_phrases == ["broom", "dustpan"]

@@ -32,13 +32,14 @@ from lano3dp.perception.sim_oracle import COLOURS, SIZE_WORDS, canonical_attribu
 _WORD = re.compile(r"[a-z]+(?:'[a-z]+)?|[.,;:!?]")
 _SENTENCE_END = frozenset(".;:!?")
 DETERMINERS = frozenset(
-    "the a an this that these those its it's my your our their his her some any another other both either each".split()
+    """the a an this that these those its it's my your our their his her some any another other both either each
+    all two three four few several""".split()
 )
 # Words that end a noun phrase: prepositions, conjunctions, adverbs of place, pronouns.
 _BOUNDARY = frozenset(
     """in into on onto over under from to with without of at by near next beside behind inside out up down
     off away back for using toward towards across through around while and or but then so that which who
-    please again too there here it them is are be was were can could would will should if when before
+    please again too there here it them is are be was were can could would will should if when before 's
     after until as not don't do does very now just also still nearby close somewhere""".split()
 )
 # Nouns that never name an object to look at.
@@ -168,7 +169,10 @@ class OfflineDecomposer:
         return self.registry.validate(plan, scene_objects)
 
     def parse(self, instruction: str, scene_objects: Sequence[str] | None = None) -> Parse:
-        words = _WORD.findall(instruction.lower().replace("’", "'"))
+        words = []
+        for word in _WORD.findall(instruction.lower().replace("’", "'")):
+            # "bowl's" -> bowl 's, "there's" -> there 's: the noun stays a noun.
+            words.extend([word[:-2], "'s"] if word.endswith("'s") and len(word) > 2 else [word])
         parse = Parse(tokens=words)
         task_mask = [True] * len(words)
         for start, end in self._obstacle_spans(words):
@@ -177,9 +181,9 @@ class OfflineDecomposer:
             parse.obstacles.extend(self._noun_phrase_list(words[start:end]))
             for i in range(start, end):
                 task_mask[i] = False
-        for start, end in self._in_the_way_spans(words):
+        for start, end, stop in self._in_the_way_spans(words):
             parse.obstacles.extend(self._noun_phrase_list(words[start:end]))
-            for i in range(start, end + 3):
+            for i in range(start, stop):
                 task_mask[i] = False
         task = [w if keep else "," for w, keep in zip(words, task_mask, strict=True)]
         verb_positions = self._find_verbs(task, parse)
@@ -225,15 +229,19 @@ class OfflineDecomposer:
         return previous in ("and", ",") and bool(lemmas(word) & self._verbs.keys())
 
     @staticmethod
-    def _in_the_way_spans(words: list[str]) -> list[tuple[int, int]]:
-        """The noun phrase before "in the way" ("there is a mug in the way")."""
+    def _in_the_way_spans(words: list[str]) -> list[tuple[int, int, int]]:
+        """(start, end, stop): the noun phrase words[start:end] before "in the way" ("there is a mug in
+        the way", "the mug is in the way"); words[start:stop] are not task words."""
         spans = []
+        copulas = {"is", "are", "'s", "was", "were", "sits", "stands"}
+        stops = _SENTENCE_END | _CLAUSE_ENDS | copulas | {","}
         for i in range(len(words) - 2):
             if words[i : i + 3] == ["in", "the", "way"]:
-                start = i
-                while start > 0 and words[start - 1] not in _SENTENCE_END | {",", "is", "are", "'s"} | _CLAUSE_ENDS:
+                end = i - 1 if i and words[i - 1] in copulas else i
+                start = end
+                while start > 0 and words[start - 1] not in stops:
                     start -= 1
-                spans.append((start, i))
+                spans.append((start, end, i + 3))
         return spans
 
     def _noun_phrase_list(self, words: Sequence[str]) -> list[ObjectRef]:

@@ -5,6 +5,7 @@ import pytest
 
 from lano3dp.errors import EmptyCloudError
 from lano3dp.perception import (
+    AmbiguousObjectError,
     ObjectNotFoundError,
     ObjectObserver,
     SimOracleSegmenter,
@@ -103,3 +104,29 @@ def test_scene_cloud_of_an_empty_table_is_an_error():
     frame = render_boxes(top_down_camera(32), [])
     with pytest.raises(EmptyCloudError, match="above the table"):
         scene_cloud(frame)
+
+
+def test_observe_instances_gives_every_matching_object_its_own_cloud():
+    mugs = [
+        Box("mug_1", (0.15, -0.15), (0.05, 0.05, 0.08), {"kind": "mug", "color": "blue"}),
+        Box("mug_2", (-0.15, 0.15), (0.05, 0.05, 0.08), {"kind": "mug", "color": "white"}),
+    ]
+    frame = render_boxes(top_down_camera(96, tilt_deg=25.0), [BOWL, *mugs])
+    observer = ObjectObserver(SimOracleSegmenter(), n_points=32)
+    with pytest.raises(AmbiguousObjectError):
+        observer.observe(frame, ["mugs"])
+    clouds = observer.observe_instances(frame, ["mugs", "bowl"])
+    assert clouds.names == ("mugs", "mugs", "bowl") and clouds.matched_names == ("mug_1", "mug_2", "red_bowl")
+    assert clouds.points.shape == (3, 32, 3)
+    assert inside(clouds.points[0], mugs[0]).all() and inside(clouds.points[1], mugs[1]).all()
+    assert observer.observe_instances(frame, ["white mug"]).matched_names == ("mug_2",)
+    with pytest.raises(ObjectNotFoundError, match="'vase' was not found.*visible: mug_1, mug_2, red_bowl"):
+        observer.observe_instances(frame, ["vase"])
+
+
+def test_observe_instances_falls_back_to_one_object_per_phrase():
+    from lano3dp.perception import MaskPerturbation, PerturbedSegmenter
+
+    plain = PerturbedSegmenter(SimOracleSegmenter(), MaskPerturbation())  # has no segment_instances
+    clouds = ObjectObserver(plain, n_points=16).observe_instances(scene(), ["bowl", "pan"])
+    assert clouds.matched_names == ("red_bowl", "pan")

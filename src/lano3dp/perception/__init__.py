@@ -4,7 +4,7 @@ Light imports only; the transformers backends (`open_vocab`, `tracker`) and the 
 source are imported from their modules on demand.
 """
 
-from lano3dp.perception.base import MaskResult, Segmenter
+from lano3dp.perception.base import InstanceSegmenter, MaskResult, Segmenter
 from lano3dp.perception.exceptions import (
     AmbiguousObjectError,
     MissingWeightsError,
@@ -18,6 +18,7 @@ from lano3dp.perception.sim_oracle import SimOracleSegmenter, resolve_phrase
 
 __all__ = [
     "AmbiguousObjectError",
+    "InstanceSegmenter",
     "MaskPerturbation",
     "MaskResult",
     "MissingWeightsError",

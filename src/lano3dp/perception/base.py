@@ -61,3 +61,12 @@ class Segmenter(Protocol):
     def segment(self, frame: RGBDFrame, phrases: Sequence[str]) -> list[MaskResult]:
         """One `MaskResult` per phrase, in the order given."""
         ...
+
+
+@runtime_checkable
+class InstanceSegmenter(Protocol):
+    """A segmenter that can also return every instance a phrase matches ("avoid the cups")."""
+
+    def segment_instances(self, frame: RGBDFrame, phrase: str) -> list[MaskResult]:
+        """One found `MaskResult` per visible instance of `phrase` (empty list if none)."""
+        ...

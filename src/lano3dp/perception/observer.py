@@ -13,7 +13,7 @@ import numpy as np
 from lano3dp.errors import EmptyCloudError
 from lano3dp.geometry.frame import RGBDFrame
 from lano3dp.geometry.pointcloud import crop_to_box, depth_to_points, farthest_point_sample
-from lano3dp.perception.base import MaskResult, Segmenter
+from lano3dp.perception.base import InstanceSegmenter, MaskResult, Segmenter
 from lano3dp.perception.exceptions import ObjectNotFoundError, TooFewPointsError
 
 
@@ -105,6 +105,37 @@ class ObjectObserver:
         return ObjectClouds(
             points=np.stack(clouds).astype(np.float32),
             names=tuple(phrases),
+            matched_names=tuple(r.matched_name for r in results),
+            pixel_counts=np.array([r.pixel_count for r in results], dtype=np.int64),
+            point_counts=np.array(counts, dtype=np.int64),
+            scores=np.array([r.score for r in results], dtype=np.float32),
+            masks=tuple(r.mask for r in results),
+        )
+
+    def observe_instances(self, frame: RGBDFrame, phrases: Sequence[str]) -> ObjectClouds:
+        """Clouds of every instance each phrase matches, for obstacles ("avoid the cups": each cup is one
+        obstacle, and two mugs are never merged into one cloud). `names` repeats the phrase per instance;
+        `matched_names` tells them apart. A segmenter without `segment_instances` gives one per phrase.
+
+        Raises:
+            ObjectNotFoundError: a phrase matches nothing visible.
+            TooFewPointsError: an instance has fewer than `min_points` valid depth points.
+        """
+        if not isinstance(self.segmenter, InstanceSegmenter):
+            return self.observe(frame, phrases)
+        results: list[MaskResult] = []
+        for phrase in phrases:
+            instances = self.segmenter.segment_instances(frame, phrase)
+            if not instances:
+                (missing,) = self.segmenter.segment(frame, [phrase])
+                raise ObjectNotFoundError(phrase, missing.visible)
+            results.extend(instances)
+        if not results:
+            raise ValueError("observe_instances needs at least one object phrase")
+        clouds, counts = zip(*(self.cloud_from_mask(frame, r) for r in results), strict=True)
+        return ObjectClouds(
+            points=np.stack(clouds).astype(np.float32),
+            names=tuple(r.phrase for r in results),
             matched_names=tuple(r.matched_name for r in results),
             pixel_counts=np.array([r.pixel_count for r in results], dtype=np.int64),
             point_counts=np.array(counts, dtype=np.int64),

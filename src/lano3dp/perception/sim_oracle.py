@@ -137,7 +137,8 @@ class SimOracleSegmenter:
             raise ValueError(f"ambiguity must be 'error' or 'largest', got {ambiguity!r}")
         self.ambiguity = ambiguity
 
-    def segment(self, frame: RGBDFrame, phrases: Sequence[str]) -> list[MaskResult]:
+    @staticmethod
+    def _scene(frame: RGBDFrame) -> tuple[list[SceneObject], dict[str, np.ndarray]]:
         if frame.segmentation is None:
             raise ValueError("SimOracleSegmenter needs frame.segmentation (simulator ground truth); got none")
         objects = [
@@ -148,6 +149,19 @@ class SimOracleSegmenter:
             name: np.isin(frame.segmentation, np.asarray(ids, dtype=np.int64))
             for name, ids in frame.instance_names.items()
         }
+        return objects, masks
+
+    def segment_instances(self, frame: RGBDFrame, phrase: str) -> list[MaskResult]:
+        """Every visible object `phrase` can mean, by name (obstacles: "avoid the cups" means all of them)."""
+        objects, masks = self._scene(frame)
+        return [
+            MaskResult(phrase, masks[name], 1.0, True, name)
+            for name in sorted(resolve_phrase(phrase, objects))
+            if masks[name].any()
+        ]
+
+    def segment(self, frame: RGBDFrame, phrases: Sequence[str]) -> list[MaskResult]:
+        objects, masks = self._scene(frame)
         visible = tuple(name for name in sorted(masks) if masks[name].any())
         results = []
         for phrase in phrases:

@@ -205,3 +205,10 @@ def test_config_from_environment(monkeypatch):
     monkeypatch.delenv("OPENAI_BASE_URL")
     with pytest.raises(Exception, match="LANO3DP_LLM_API_KEY"):
         _ = LLMDecomposer(LLMConfig.from_env()).client
+
+
+def test_llm_synonyms_are_grounded_in_the_scene(fake_llm):
+    skillet = dict(GOOD, targets=[GOOD["targets"][0], {"name": "skillet", "color": None, "size": None}], obstacles=[])
+    fake_llm.script = [skillet]
+    outcome = decomposer(fake_llm).decompose_with_report(INSTRUCTION, scene_objects=["red_bowl", "frying_pan"])
+    assert outcome.source == "llm" and outcome.plan.target_phrases == ["red bowl", "pan"]

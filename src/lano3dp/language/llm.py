@@ -141,6 +141,8 @@ class LLMDecomposer:
         self.config = config or LLMConfig.from_env()
         self.registry = registry or default_registry()
         self.fallback = OfflineDecomposer(self.registry) if fallback == "default" else fallback
+        # Maps the LLM's words onto scene object kinds the same way the rule parser does.
+        self._grounder = self.fallback or OfflineDecomposer(self.registry)
         self._client = client
 
     @property
@@ -179,7 +181,10 @@ class LLMDecomposer:
                 break
             replies.append(content or "")
             try:
-                plan = self.registry.validate(_parse_reply(content), scene_objects)
+                plan = _parse_reply(content)
+                if scene_objects is not None:
+                    plan = self._grounder.ground(plan, scene_objects)
+                plan = self.registry.validate(plan, scene_objects)
                 return PlanOutcome(plan, "llm" if attempt == 0 else "llm_retry", errors, replies)
             except (ValueError, ValidationError, PlanValidationError) as error:
                 problem = _describe(error)

@@ -168,6 +168,19 @@ class OfflineDecomposer:
             plan = self._ground_in_scene(plan, skill, scene_objects)
         return self.registry.validate(plan, scene_objects)
 
+    def ground(self, plan: TaskPlan, scene_objects: Sequence[str]) -> TaskPlan:
+        """`plan` with targets and obstacles renamed to the scene's object kinds where a slot synonym
+        (or the embedding matcher) says they mean the same ("skillet" -> the scene's "pan").
+
+        Raises:
+            UnknownSkillError: the plan's skill is not registered.
+            UnknownObjectError: an object matches nothing in the scene.
+        """
+        skill = self.registry.get(plan.skill)
+        if len(plan.targets) != len(skill.slots):
+            return plan  # validation reports the count mismatch with the slot words
+        return self._ground_in_scene(plan, skill, scene_objects)
+
     def parse(self, instruction: str, scene_objects: Sequence[str] | None = None) -> Parse:
         words = []
         for word in _WORD.findall(instruction.lower().replace("’", "'")):

@@ -1,0 +1,440 @@
+"""Training loop for DiffusionPolicy: AdamW + cosine warm-up, EMA, validation, atomic checkpoints, resume, DDP.
+
+One code path serves one process and `torchrun --nproc_per_node N` (data-parallel: gloo on CPU,
+nccl on CUDA; rank 0 writes checkpoints and logs). A run folder looks like
+
+    <out>/train_config.json
+    <out>/checkpoints/step_XXXXXXX/   (see lano3dp.policy.checkpoint)   <out>/checkpoints/last -> step_...
+    <out>/tensorboard/                 loss, val_loss, lr
+
+Starting `train` on a folder that already has a checkpoint resumes from it (step, raw and EMA
+weights, optimizer, LR schedule). Randomness is a pure function of (seed, rank, step): the data
+order of an epoch comes from (seed, epoch) and the diffusion noise of a step from (seed, rank, step),
+so a resumed run draws exactly what the uninterrupted run would have drawn.
+
+Usage: python -m lano3dp.train --config train.json   (or the `lano3dp train` command).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import math
+import os
+import sys
+from contextlib import nullcontext
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from lano3dp.data import EpisodeStore, SequenceDataset, split_episodes
+from lano3dp.errors import Lano3dpError
+from lano3dp.policy import DiffusionPolicy, PolicyConfig
+from lano3dp.policy.checkpoint import (
+    EMA,
+    TrainingState,
+    atomic_directory,
+    checkpoint_name,
+    latest_resumable,
+    load_training_state,
+    prune_training_states,
+    remove_stale_temporaries,
+    save_training_state,
+    update_last_pointer,
+)
+from lano3dp.policy.modeling import load_config
+
+
+class TrainingConfigError(Lano3dpError, ValueError):
+    """The training configuration does not fit the dataset or the run folder."""
+
+
+@dataclass
+class TrainConfig:
+    """Everything a training run needs; saved as train_config.json in the run and every checkpoint.
+
+    Attributes:
+        data: the zarr episode store.
+        out: the run folder (resumed if it already holds a checkpoint).
+        policy: the policy configuration; None builds the default one from the dataset (its object_names).
+        steps: total optimisation steps (a resumed run continues up to this number).
+        batch_size: windows per step and per process (the global batch is batch_size x world size).
+        lr, weight_decay, betas: AdamW; lr 5e-4 suits CPU-length runs (notes: cpu-cost.md sec. 7).
+        warmup_steps: linear warm-up before the cosine decay.
+        ema: keep an EMA of the weights (saved as the checkpoint's policy); ema_* is DP's schedule.
+        val_ratio: fraction of episodes held out for the validation loss.
+        val_every, ckpt_every, log_every: in steps; the last step always checkpoints.
+        val_batches: at most this many validation batches per evaluation (fixed noise, comparable across steps).
+        keep_training_states: how many newest checkpoints keep their (large) training state.
+        seed: weights, data order and diffusion noise all derive from it.
+        num_workers: DataLoader worker processes (0: load in the training process).
+        threads: torch intra-op threads (None: leave torch's default).
+        device: "cpu" or "cuda" ("cuda:<i>" is picked per rank under torchrun).
+        bf16: bfloat16 autocast for the forward pass (CPU with AMX: about -19% step time for the small model).
+        progress: show a tqdm bar (rank 0).
+    """
+
+    data: str
+    out: str
+    policy: PolicyConfig | None = None
+    steps: int = 3000
+    batch_size: int = 64
+    lr: float = 5e-4
+    weight_decay: float = 1e-6
+    betas: tuple[float, float] = (0.95, 0.999)
+    warmup_steps: int = 500
+    ema: bool = True
+    ema_inv_gamma: float = 1.0
+    ema_power: float = 0.75
+    ema_max: float = 0.9999
+    val_ratio: float = 0.05
+    val_every: int = 500
+    val_batches: int = 8
+    ckpt_every: int = 1000
+    log_every: int = 10
+    keep_training_states: int = 1
+    seed: int = 0
+    num_workers: int = 0
+    threads: int | None = None
+    device: str = "cpu"
+    bf16: bool = False
+    progress: bool = True
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        self.data, self.out = str(self.data), str(self.out)
+        self.betas = tuple(float(b) for b in self.betas)
+        if isinstance(self.policy, dict):
+            self.policy = PolicyConfig.from_dict(self.policy)
+        for name in ("steps", "batch_size", "val_every", "ckpt_every", "log_every", "val_batches"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"TrainConfig: {name} must be >= 1, got {getattr(self, name)}")
+        if self.warmup_steps < 0 or self.num_workers < 0 or self.keep_training_states < 1:
+            raise ValueError("TrainConfig: warmup_steps and num_workers must be >= 0, keep_training_states >= 1")
+        if not 0.0 <= self.val_ratio < 1.0:
+            raise ValueError(f"TrainConfig: val_ratio must be in [0, 1), got {self.val_ratio}")
+        if self.lr <= 0 or len(self.betas) != 2:
+            raise ValueError("TrainConfig: lr must be > 0 and betas a pair")
+
+    def to_dict(self) -> dict[str, Any]:
+        data = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        data["policy"] = self.policy.to_dict() if self.policy is not None else None
+        data["betas"] = list(self.betas)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> TrainConfig:
+        known = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"TrainConfig: unknown fields {unknown}")
+        return cls(**data)
+
+    def to_json(self) -> str:
+        return json.dumps(self.to_dict(), indent=2)
+
+
+def policy_config_for_dataset(data: str | Path, **overrides) -> PolicyConfig:
+    """The default PolicyConfig for a dataset: slots from its object_names, n_points from its clouds."""
+    store = EpisodeStore.open(data)
+    fields: dict[str, Any] = {}
+    names = store.attrs.get("object_names")
+    if names:
+        fields["object_names"] = tuple(names)
+    shapes = _step_shapes(store)
+    if "object_clouds" in shapes:
+        fields["n_points"] = shapes["object_clouds"][1]
+    if "scene_cloud" in shapes:
+        fields["scene_points"] = shapes["scene_cloud"][0]
+    if "rgb" in shapes:
+        fields["image_size"] = shapes["rgb"][0]
+    fields["extra"] = {key: store.attrs[key] for key in ("skill", "task") if key in store.attrs}
+    return PolicyConfig(**(fields | overrides))
+
+
+def _step_shapes(store: EpisodeStore) -> dict[str, tuple[int, ...]]:
+    """Per-step shape of every key, from the first episode."""
+    if store.n_episodes == 0:
+        raise TrainingConfigError(f"{store.path} has no episodes")
+    return {key: tuple(value.shape[1:]) for key, value in store.get_episode(0).items()}
+
+
+_VALIDATION_STREAM = 2**31 - 1  # a "rank" no training process has: validation noise never repeats training noise
+
+
+def _noise_seed(seed: int, rank: int, step: int) -> int:
+    return int(np.random.SeedSequence([seed, rank, step]).generate_state(1, dtype=np.uint64)[0] >> 1)
+
+
+class Trainer:
+    """Builds (or resumes) a run; `run()` trains to `config.steps` and returns the final checkpoint."""
+
+    def __init__(self, config: TrainConfig):
+        self.config = config
+        self.world_size = int(os.environ.get("WORLD_SIZE", "1"))
+        self.distributed = self.world_size > 1
+        self._init_distributed()
+        self.is_main = self.rank == 0
+        if config.threads:
+            torch.set_num_threads(config.threads)
+        self.out = Path(config.out)
+        self.checkpoints = self.out / "checkpoints"
+        if self.is_main:
+            self.checkpoints.mkdir(parents=True, exist_ok=True)
+            remove_stale_temporaries(self.checkpoints)
+
+        resume_from = latest_resumable(self.checkpoints)
+        self.resumed_from: Path | None = resume_from
+        state = load_training_state(resume_from) if resume_from is not None else None
+        policy_config = self._policy_config(resume_from)
+
+        store = EpisodeStore.open(config.data)
+        self._check_dataset(store, policy_config)
+        train_episodes, val_episodes = split_episodes(store.n_episodes, config.val_ratio, config.seed)
+        window = dict(obs_keys=policy_config.obs_keys, n_obs_steps=policy_config.n_obs_steps,
+                      horizon=policy_config.horizon, n_action_steps=policy_config.n_action_steps)
+        self.train_set = SequenceDataset(store, episodes=train_episodes, **window)
+        self.val_set = SequenceDataset(store, episodes=val_episodes, **window) if len(val_episodes) else None
+        self.steps_per_epoch = len(self.train_set) // (config.batch_size * self.world_size)
+        if self.steps_per_epoch == 0:
+            raise TrainingConfigError(
+                f"{config.data} has {len(self.train_set)} training windows, fewer than one batch of "
+                f"{config.batch_size} x {self.world_size} process(es); lower --batch-size")
+
+        torch.manual_seed(config.seed)  # identical initial weights on every rank
+        self.policy = DiffusionPolicy(policy_config).to(self.device)
+        if state is None:
+            self.policy.fit_normalizer(self.train_set)
+        else:
+            self._load_weights(self.policy, state.model, state.path)
+        self.optimizer = torch.optim.AdamW(self.policy.parameters(), lr=config.lr, betas=config.betas,
+                                           weight_decay=config.weight_decay, fused=True)
+        from diffusers.optimization import get_cosine_schedule_with_warmup
+
+        self.lr_scheduler = get_cosine_schedule_with_warmup(self.optimizer, config.warmup_steps, config.steps)
+        self.ema = EMA(self.policy, config.ema_inv_gamma, config.ema_power, max_value=config.ema_max) \
+            if config.ema else None
+        self.step = 0
+        if state is not None:
+            self._restore(state, resume_from)
+        self.model = self.policy
+        if self.distributed:
+            from torch.nn.parallel import DistributedDataParallel
+
+            self.model = DistributedDataParallel(
+                self.policy, device_ids=[self.device.index] if self.device.type == "cuda" else None)
+
+    # ---- setup -------------------------------------------------------------------------
+    def _init_distributed(self) -> None:
+        requested = torch.device(self.config.device)
+        if not self.distributed:
+            self.rank = 0
+            self.device = requested
+            return
+        import torch.distributed as dist
+
+        self.rank = int(os.environ["RANK"])
+        if requested.type == "cuda":
+            self.device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", self.rank)))
+            torch.cuda.set_device(self.device)
+        else:
+            self.device = requested
+        if not dist.is_initialized():
+            dist.init_process_group("nccl" if self.device.type == "cuda" else "gloo")
+
+    def _policy_config(self, resume_from: Path | None) -> PolicyConfig:
+        requested = self.config.policy
+        if resume_from is not None:
+            saved = load_config(resume_from / "config.json")
+            if requested is not None and requested != saved:
+                raise TrainingConfigError(
+                    f"{self.out} holds a run with another policy configuration ({resume_from / 'config.json'}); "
+                    "resume it with the same settings or train into a new --out folder")
+            return saved
+        return requested if requested is not None else policy_config_for_dataset(self.config.data)
+
+    def _check_dataset(self, store: EpisodeStore, policy_config: PolicyConfig) -> None:
+        missing = [key for key in (*policy_config.obs_keys, "action") if key not in store.keys]
+        if missing:
+            raise TrainingConfigError(f"{store.path} has no {missing} (keys: {store.keys}); a "
+                                      f"{policy_config.obs_type!r} policy needs {[*policy_config.obs_keys, 'action']}")
+        if policy_config.obs_type == "objects":
+            names = store.attrs.get("object_names")
+            if names is not None and tuple(names) != policy_config.object_names:
+                raise TrainingConfigError(f"{store.path} stores object slots {names}, the policy expects "
+                                          f"{list(policy_config.object_names)}")
+            slots = _step_shapes(store)["object_clouds"][0]
+            if slots != policy_config.n_slots:
+                raise TrainingConfigError(f"{store.path} has {slots} object slots, the policy {policy_config.n_slots}")
+
+    @staticmethod
+    def _load_weights(module: torch.nn.Module, weights: dict, path: Path) -> None:
+        from lano3dp.errors import CorruptFileError
+
+        try:
+            module.load_state_dict(weights, strict=True)
+        except RuntimeError as error:
+            raise CorruptFileError(path, f"weights do not match the policy configuration: {error}") from error
+
+    def _restore(self, state: TrainingState, path: Path) -> None:
+        from lano3dp.errors import CorruptFileError
+
+        try:
+            self.optimizer.load_state_dict(state.optimizer)
+            self.lr_scheduler.load_state_dict(state.lr_scheduler)
+        except (ValueError, KeyError, RuntimeError) as error:
+            raise CorruptFileError(path / "training_state.json", f"cannot restore the optimizer: {error}") from error
+        if self.ema is not None:
+            ema_policy = DiffusionPolicy.from_pretrained(path, device=self.device)
+            self.ema.model.load_state_dict(ema_policy.state_dict())
+            self.ema.optimization_step = int(state.ema.get("optimization_step", state.step))
+        self.step = state.step
+
+    # ---- loop --------------------------------------------------------------------------
+    def _batches(self, epoch: int, skip: int) -> list[list[int]]:
+        """This rank's batches of an epoch: a (seed, epoch) permutation split across ranks, as DistributedSampler."""
+        from torch.utils.data import DistributedSampler
+
+        sampler = DistributedSampler(self.train_set, num_replicas=self.world_size, rank=self.rank, shuffle=True,
+                                     seed=self.config.seed, drop_last=True)
+        sampler.set_epoch(epoch)
+        indices = list(sampler)
+        size = self.config.batch_size
+        return [indices[i * size:(i + 1) * size] for i in range(skip, self.steps_per_epoch)]
+
+    def _loader(self, dataset, batches):
+        from torch.utils.data import DataLoader
+
+        return DataLoader(dataset, batch_sampler=batches, num_workers=self.config.num_workers)
+
+    def run(self) -> Path:
+        """Train up to config.steps; returns the final checkpoint folder (a DiffusionPolicy checkpoint)."""
+        config = self.config
+        writer = self._writer()
+        progress = self._progress()
+        autocast = (torch.autocast(self.device.type, dtype=torch.bfloat16) if config.bf16 else nullcontext())
+        generator = torch.Generator(self.device)
+        last_checkpoint = self.resumed_from if self.resumed_from is not None and self.step >= config.steps else None
+        self.model.train()
+        try:
+            while self.step < config.steps:
+                epoch, offset = divmod(self.step, self.steps_per_epoch)
+                for batch in self._loader(self.train_set, self._batches(epoch, offset)):
+                    generator.manual_seed(_noise_seed(config.seed, self.rank, self.step))
+                    with autocast:
+                        loss = self.model(batch, generator=generator)
+                    self.optimizer.zero_grad(set_to_none=True)
+                    loss.backward()
+                    lr = self.optimizer.param_groups[0]["lr"]  # the rate this step used
+                    self.optimizer.step()
+                    self.lr_scheduler.step()
+                    if self.ema is not None:
+                        self.ema.update(self.policy)
+                    self.step += 1
+                    value = float(loss.detach())
+                    if not math.isfinite(value):
+                        raise FloatingPointError(f"training loss became {value} at step {self.step}")
+                    if self.is_main:
+                        progress.update(1)
+                        if self.step % config.log_every == 0 or self.step == config.steps:
+                            progress.set_postfix(loss=f"{value:.4f}")
+                            writer.add_scalar("loss", value, self.step)
+                            writer.add_scalar("lr", lr, self.step)
+                        if self.val_set is not None and (self.step % config.val_every == 0
+                                                         or self.step == config.steps):
+                            val_loss = self.validation_loss()
+                            writer.add_scalar("val_loss", val_loss, self.step)
+                            progress.write(f"step {self.step}: val_loss {val_loss:.4f}")
+                        if self.step % config.ckpt_every == 0 or self.step == config.steps:
+                            last_checkpoint = self.save_checkpoint()
+                    if self.step >= config.steps:
+                        break
+            if last_checkpoint is None:
+                last_checkpoint = self.checkpoints / checkpoint_name(self.step)
+        finally:
+            progress.close()
+            writer.close()
+            if self.distributed:
+                import torch.distributed as dist
+
+                dist.barrier()
+                dist.destroy_process_group()
+        return last_checkpoint
+
+    @torch.no_grad()
+    def validation_loss(self) -> float:
+        """Mean loss of the EMA policy (the one saved) over up to val_batches validation batches, fixed noise."""
+        policy = self.ema.model if self.ema is not None else self.policy
+        was_training = policy.training
+        policy.eval()
+        order = list(range(len(self.val_set)))
+        batches = [order[i:i + self.config.batch_size] for i in range(0, len(order), self.config.batch_size)]
+        batches = batches[: self.config.val_batches]
+        generator = torch.Generator(self.device)
+        losses, weights = [], []
+        for index, batch in enumerate(self._loader(self.val_set, batches)):
+            generator.manual_seed(_noise_seed(self.config.seed, _VALIDATION_STREAM, index))
+            losses.append(float(policy.compute_loss(batch, generator=generator)))
+            weights.append(len(batches[index]))
+        policy.train(was_training)
+        return float(np.average(losses, weights=weights))
+
+    def save_checkpoint(self) -> Path:
+        """Write checkpoints/step_XXXXXXX atomically and point checkpoints/last at it (rank 0 only)."""
+        final = self.checkpoints / checkpoint_name(self.step)
+        with atomic_directory(final) as folder:
+            (self.ema.model if self.ema is not None else self.policy).save_pretrained(folder)
+            save_training_state(folder, step=self.step, model=self.policy, optimizer=self.optimizer,
+                                lr_scheduler=self.lr_scheduler, ema=self.ema,
+                                extra={"seed": self.config.seed, "world_size": self.world_size})
+            (folder / "train_config.json").write_text(self.config.to_json() + "\n")
+        update_last_pointer(self.checkpoints, final.name)
+        prune_training_states(self.checkpoints, self.config.keep_training_states)
+        return final
+
+    def _writer(self):
+        if not self.is_main:
+            return _NullWriter()
+        from torch.utils.tensorboard import SummaryWriter
+
+        (self.out / "train_config.json").write_text(self.config.to_json() + "\n")
+        return SummaryWriter(str(self.out / "tensorboard"), purge_step=self.step or None)
+
+    def _progress(self):
+        from tqdm.auto import tqdm
+
+        return tqdm(total=self.config.steps, initial=self.step, desc="train", unit="step",
+                    disable=not (self.is_main and self.config.progress), dynamic_ncols=True)
+
+
+class _NullWriter:
+    def add_scalar(self, *args, **kwargs) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def train(config: TrainConfig) -> Path:
+    """Train (or resume) a policy; returns the final checkpoint folder, loadable by DiffusionPolicy.from_pretrained."""
+    return Trainer(config).run()
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="Train a lano3dp diffusion policy from a TrainConfig JSON file "
+                                                 "(works under torchrun).")
+    parser.add_argument("--config", required=True, help="path of a TrainConfig JSON file")
+    args = parser.parse_args(argv)
+    config = TrainConfig.from_dict(json.loads(Path(args.config).read_text()))
+    path = train(config)
+    if int(os.environ.get("RANK", "0")) == 0:
+        print(path)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -19,10 +19,13 @@ from lano3dp.perception import (
     SimOracleSegmenter,
 )
 from lano3dp.perception.open_vocab import (
+    Detection,
     GroundingDinoDetector,
     OpenVocabSegmenter,
     Owlv2Detector,
     SamBoxSegmenter,
+    box_iou,
+    non_max_suppression,
 )
 from lano3dp.perception.synthetic import Box, render_boxes, top_down_camera
 from lano3dp.perception.tracker import TrackingSegmenter, VideoTracker
@@ -407,3 +410,28 @@ def test_real_tracker_behind_the_segmenter_protocol(weights):
         assert [r.phrase for r in results] == ["red bowl", "pan"]
         assert all(r.found == (r.mask is not None) for r in results)
     assert tracker.started
+
+
+def test_non_max_suppression_keeps_the_best_of_overlapping_boxes():
+    def det(box, score):
+        return Detection("cup", np.array(box, dtype=np.float32), score)
+
+    a, b, c = det([0, 0, 10, 10], 0.9), det([1, 0, 11, 10], 0.8), det([30, 30, 40, 40], 0.7)
+    assert box_iou(a.box, b.box) == pytest.approx(90 / 110)
+    assert non_max_suppression([c, b, a]) == [a, c]
+    assert non_max_suppression([c, b, a], iou_threshold=0.95) == [a, b, c]
+
+
+def test_every_instance_of_an_obstacle_phrase_gets_its_own_mask(weights):
+    detector = GroundingDinoDetector.from_pretrained(weights["grounding_dino"], box_threshold=0.0, nms_iou=0.3)
+    frame = scene()
+    (all_boxes,) = detector.detect_all(frame.rgb, ["blue cup"])
+    assert len(all_boxes) >= 2 and [d.score for d in all_boxes] == sorted((d.score for d in all_boxes), reverse=True)
+    assert all(box_iou(p.box, q.box) < 0.3 for i, p in enumerate(all_boxes) for q in all_boxes[i + 1 :])
+    best = detector.detect(frame.rgb, ["blue cup"])[0]
+    assert best.score == all_boxes[0].score and np.array_equal(best.box, all_boxes[0].box)
+    segmenter = OpenVocabSegmenter(detector, BoxFiller())
+    instances = segmenter.segment_instances(frame, "blue cup")
+    assert [r.matched_name for r in instances] == [f"blue cup#{i}" for i in range(len(instances))]
+    clouds = ObjectObserver(segmenter, n_points=16, min_points=1).observe_instances(frame, ["blue cup"])
+    assert clouds.points.shape[0] == len(instances) >= 1

@@ -20,7 +20,7 @@ from lano3dp.perception._hf import check_weights_dir, clip_box, load_local, to_p
 from lano3dp.perception.base import MaskResult
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # eq on numpy fields would be ambiguous; compare .box explicitly
 class Detection:
     """The best box for one phrase.
 
@@ -41,6 +41,31 @@ class Detector(Protocol):
         ...
 
 
+def non_max_suppression(detections: list[Detection], iou_threshold: float = 0.5) -> list[Detection]:
+    """Greedy NMS, best score first. Hand-written (a few lines) so torchvision stays optional."""
+    kept: list[Detection] = []
+    for det in sorted(detections, key=lambda d: -d.score):
+        if all(box_iou(det.box, k.box) < iou_threshold for k in kept):
+            kept.append(det)
+    return kept
+
+
+def box_iou(a: np.ndarray, b: np.ndarray) -> float:
+    """Intersection over union of two xyxy boxes."""
+    w = max(0.0, min(a[2], b[2]) - max(a[0], b[0]))
+    h = max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+    inter = w * h
+    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
+    return float(inter / union) if union > 0 else 0.0
+
+
+class _BestOfAll:
+    """`detect` from `detect_all`: the top detection of each phrase."""
+
+    def detect(self, rgb: np.ndarray, phrases: Sequence[str]) -> list[Detection | None]:
+        return [found[0] if found else None for found in self.detect_all(rgb, phrases)]
+
+
 class BoxSegmenter(Protocol):
     def masks_from_boxes(self, rgb: np.ndarray, boxes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(M, H, W) bool masks and (M,) quality scores for (M, 4) xyxy pixel boxes."""
@@ -53,7 +78,7 @@ def _torch():
     return torch
 
 
-class GroundingDinoDetector:
+class GroundingDinoDetector(_BestOfAll):
     """GroundingDINO (transformers) with one forward pass for all phrases.
 
     Phrases are joined as "red bowl. pan." (GroundingDINO's prompt format); each phrase is scored
@@ -65,13 +90,16 @@ class GroundingDinoDetector:
         box_threshold: minimum phrase score for a detection.
     """
 
-    def __init__(self, model, processor, box_threshold: float = 0.35):
+    def __init__(self, model, processor, box_threshold: float = 0.35, nms_iou: float = 0.5):
         self.model = model.eval()
         self.processor = processor
         self.box_threshold = box_threshold
+        self.nms_iou = nms_iou
 
     @classmethod
-    def from_pretrained(cls, path: str | Path, box_threshold: float = 0.35) -> GroundingDinoDetector:
+    def from_pretrained(
+        cls, path: str | Path, box_threshold: float = 0.35, nms_iou: float = 0.5
+    ) -> GroundingDinoDetector:
         path = check_weights_dir(path, "GroundingDINO weights")
         from transformers import GroundingDinoForObjectDetection, GroundingDinoProcessor
 
@@ -79,6 +107,7 @@ class GroundingDinoDetector:
             load_local(GroundingDinoForObjectDetection, path, "GroundingDINO weights"),
             load_local(GroundingDinoProcessor, path, "GroundingDINO processor"),
             box_threshold,
+            nms_iou,
         )
 
     def phrase_scores(self, rgb: np.ndarray, phrases: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -104,33 +133,37 @@ class GroundingDinoDetector:
         boxes = np.stack([cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2], axis=1) * [width, height, width, height]
         return scores, boxes.astype(np.float32)
 
-    def detect(self, rgb: np.ndarray, phrases: Sequence[str]) -> list[Detection | None]:
+    def detect_all(self, rgb: np.ndarray, phrases: Sequence[str]) -> list[list[Detection]]:
+        """Per phrase, every box above the threshold after NMS, best first."""
         scores, boxes = self.phrase_scores(rgb, phrases)
         height, width = rgb.shape[:2]
-        detections: list[Detection | None] = []
-        for k, phrase in enumerate(phrases):
-            best = int(np.argmax(scores[k]))
-            if scores[k, best] < self.box_threshold:
-                detections.append(None)
-            else:
-                detections.append(Detection(phrase, clip_box(boxes[best], height, width), float(scores[k, best])))
-        return detections
+        return [
+            non_max_suppression(
+                [
+                    Detection(phrase, clip_box(boxes[q], height, width), float(scores[k, q]))
+                    for q in np.flatnonzero(scores[k] >= self.box_threshold)
+                ],
+                self.nms_iou,
+            )
+            for k, phrase in enumerate(phrases)
+        ]
 
 
-class Owlv2Detector:
+class Owlv2Detector(_BestOfAll):
     """OWLv2 (transformers): one text query per phrase; boxes come back per query natively.
 
     OWLv2 pads the image to a square before resizing; the processor's post-processing scales
     boxes by the longer side accordingly, and boxes are then clipped to the real image.
     """
 
-    def __init__(self, model, processor, box_threshold: float = 0.1):
+    def __init__(self, model, processor, box_threshold: float = 0.1, nms_iou: float = 0.5):
         self.model = model.eval()
         self.processor = processor
         self.box_threshold = box_threshold
+        self.nms_iou = nms_iou
 
     @classmethod
-    def from_pretrained(cls, path: str | Path, box_threshold: float = 0.1) -> Owlv2Detector:
+    def from_pretrained(cls, path: str | Path, box_threshold: float = 0.1, nms_iou: float = 0.5) -> Owlv2Detector:
         path = check_weights_dir(path, "OWLv2 weights")
         from transformers import Owlv2ForObjectDetection, Owlv2Processor
 
@@ -138,9 +171,11 @@ class Owlv2Detector:
             load_local(Owlv2ForObjectDetection, path, "OWLv2 weights"),
             load_local(Owlv2Processor, path, "OWLv2 processor"),
             box_threshold,
+            nms_iou,
         )
 
-    def detect(self, rgb: np.ndarray, phrases: Sequence[str]) -> list[Detection | None]:
+    def detect_all(self, rgb: np.ndarray, phrases: Sequence[str]) -> list[list[Detection]]:
+        """Per phrase, every box above the threshold after NMS, best first."""
         torch = _torch()
         phrases = list(phrases)
         height, width = rgb.shape[:2]
@@ -153,12 +188,11 @@ class Owlv2Detector:
         (result,) = self.processor.post_process_grounded_object_detection(
             outputs, threshold=self.box_threshold, target_sizes=[(height, width)]
         )
-        detections: list[Detection | None] = [None] * len(phrases)
+        per_phrase: list[list[Detection]] = [[] for _ in phrases]
         for score, label, box in zip(result["scores"], result["labels"], result["boxes"], strict=True):
             k = int(label)
-            if detections[k] is None or float(score) > detections[k].score:
-                detections[k] = Detection(phrases[k], clip_box(box.numpy(), height, width), float(score))
-        return detections
+            per_phrase[k].append(Detection(phrases[k], clip_box(box.numpy(), height, width), float(score)))
+        return [non_max_suppression(found, self.nms_iou) for found in per_phrase]
 
 
 class SamBoxSegmenter:
@@ -240,6 +274,19 @@ class OpenVocabSegmenter:
             raise ValueError(f"detector must be one of {sorted(kinds)}, got {detector!r}")
         extra = {} if box_threshold is None else {"box_threshold": box_threshold}
         return cls(kinds[detector].from_pretrained(detector_dir, **extra), SamBoxSegmenter.from_pretrained(sam_dir))
+
+    def segment_instances(self, frame: RGBDFrame, phrase: str) -> list[MaskResult]:
+        """Every detected instance of `phrase` (after NMS) with its SAM mask; named "phrase#i"."""
+        if not hasattr(self.detector, "detect_all"):
+            return [r for r in self.segment(frame, [phrase]) if r.found]
+        (detections,) = self.detector.detect_all(frame.rgb, [phrase])
+        boxes = np.stack([d.box for d in detections]) if detections else np.zeros((0, 4))
+        masks, _ = self.box_segmenter.masks_from_boxes(frame.rgb, boxes)
+        return [
+            MaskResult(phrase, mask, det.score, True, f"{phrase}#{i}")
+            for i, (det, mask) in enumerate(zip(detections, masks, strict=True))
+            if mask.any()
+        ]
 
     def segment(self, frame: RGBDFrame, phrases: Sequence[str]) -> list[MaskResult]:
         phrases = list(phrases)

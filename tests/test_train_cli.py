@@ -1,0 +1,51 @@
+"""`lano3dp train` on the command line."""
+
+import json
+
+from typer.testing import CliRunner
+
+from lano3dp.cli import app
+from lano3dp.policy import DiffusionPolicy
+
+
+def _reach_store(tmp_path):
+    from test_train import write_reach_store
+
+    return write_reach_store(tmp_path / "reach.zarr", episodes=4)
+
+
+def test_train_command_trains_a_loadable_policy(tmp_path):
+    data = _reach_store(tmp_path)
+    result = CliRunner().invoke(app, ["train", "--data", str(data), "--out", str(tmp_path / "run"), "--steps", "2",
+                                      "--batch-size", "4", "--warmup-steps", "1", "--horizon", "8",
+                                      "--n-action-steps", "4", "--encoder", "mlp", "--val-ratio", "0",
+                                      "--ckpt-every", "2", "--no-progress", "--seed", "3"])
+    assert result.exit_code == 0, result.output
+    assert "step_0000002" in result.output
+    policy = DiffusionPolicy.from_pretrained(tmp_path / "run")
+    assert policy.config.point_encoder == "mlp" and policy.config.down_dims == (64, 128, 256)
+    assert policy.config.object_names == ("marker",) and policy.config.horizon == 8
+    saved = json.loads((tmp_path / "run" / "train_config.json").read_text())
+    assert saved["seed"] == 3 and saved["steps"] == 2
+
+
+def test_train_command_reports_a_dataset_that_lacks_the_observation(tmp_path):
+    data = _reach_store(tmp_path)
+    result = CliRunner().invoke(app, ["train", "--data", str(data), "--out", str(tmp_path / "run"),
+                                      "--obs-type", "scene", "--no-progress"])
+    assert result.exit_code == 1
+    assert "scene_cloud" in result.output
+
+
+def test_train_command_rejects_a_point_count_the_dataset_does_not_have(tmp_path):
+    data = _reach_store(tmp_path)
+    result = CliRunner().invoke(app, ["train", "--data", str(data), "--out", str(tmp_path / "run"),
+                                      "--n-points", "64"])
+    assert result.exit_code != 0 and "16 points per object" in result.output
+
+
+def test_train_help_lists_the_options():
+    result = CliRunner().invoke(app, ["train", "--help"])
+    assert result.exit_code == 0
+    for option in ("--data", "--out", "--size", "--obs-type", "--encoder", "--n-points", "--bf16", "--ckpt-every"):
+        assert option in result.output

@@ -125,8 +125,10 @@ def test_observe_instances_gives_every_matching_object_its_own_cloud():
 
 
 def test_observe_instances_falls_back_to_one_object_per_phrase():
-    from lano3dp.perception import MaskPerturbation, PerturbedSegmenter
+    class Plain:  # a segmenter with no segment_instances
+        def segment(self, frame, phrases):
+            return SimOracleSegmenter().segment(frame, phrases)
 
-    plain = PerturbedSegmenter(SimOracleSegmenter(), MaskPerturbation())  # has no segment_instances
+    plain = Plain()
     clouds = ObjectObserver(plain, n_points=16).observe_instances(scene(), ["bowl", "pan"])
     assert clouds.matched_names == ("red_bowl", "pan")

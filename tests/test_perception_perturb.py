@@ -87,3 +87,10 @@ def test_invalid_settings_are_rejected():
         MaskPerturbation(drop_fraction=1.0)
     with pytest.raises(ValueError, match="miss_probability"):
         MaskPerturbation(miss_probability=1.5)
+
+
+def test_instances_are_perturbed_one_by_one():
+    (eroded,) = perturbed(erode_px=2).segment_instances(FRAME, "bowl")
+    h, w = bbox_size(BOWL_MASK)
+    assert eroded.matched_name == "bowl" and eroded.mask.sum() == (h - 4) * (w - 4)
+    assert perturbed(miss_probability=1.0).segment_instances(FRAME, "bowl") == []

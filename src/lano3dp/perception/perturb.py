@@ -14,7 +14,7 @@ import numpy as np
 from scipy import ndimage
 
 from lano3dp.geometry.frame import RGBDFrame
-from lano3dp.perception.base import MaskResult, Segmenter
+from lano3dp.perception.base import InstanceSegmenter, MaskResult, Segmenter
 
 # 4-connected structuring element: each iteration moves the boundary by one pixel.
 _CROSS = ndimage.generate_binary_structure(2, 1)
@@ -78,6 +78,17 @@ class PerturbedSegmenter:
 
     def reset(self, seed: int | None = None) -> None:
         self._rng = np.random.default_rng(self.perturbation.seed if seed is None else seed)
+
+    def segment_instances(self, frame: RGBDFrame, phrase: str) -> list[MaskResult]:
+        """Perturbed instances of `phrase` (a missed instance is dropped); needs an inner InstanceSegmenter."""
+        if not isinstance(self.inner, InstanceSegmenter):
+            return [r for r in self.segment(frame, [phrase]) if r.found]
+        out = []
+        for result in self.inner.segment_instances(frame, phrase):
+            mask = self.perturbation.apply(result.mask, self._rng)
+            if mask is not None:
+                out.append(MaskResult(result.phrase, mask, result.score, True, result.matched_name))
+        return out
 
     def segment(self, frame: RGBDFrame, phrases: Sequence[str]) -> list[MaskResult]:
         results = self.inner.segment(frame, phrases)

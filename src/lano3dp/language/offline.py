@@ -23,6 +23,7 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Protocol
 
 from lano3dp.language.exceptions import InstructionNotUnderstoodError, UnknownObjectError
 from lano3dp.language.plan import ObjectRef, TaskPlan
@@ -32,7 +33,7 @@ from lano3dp.perception.sim_oracle import COLOURS, SIZE_WORDS, canonical_attribu
 _WORD = re.compile(r"[a-z]+(?:'[a-z]+)?|[.,;:!?]")
 _SENTENCE_END = frozenset(".;:!?")
 DETERMINERS = frozenset(
-    """the a an this that these those its it's my your our their his her some any another other both either each
+    """the a an this that these those its my your our their his her some any another other both either each
     all two three four few several""".split()
 )
 # Words that end a noun phrase: prepositions, conjunctions, adverbs of place, pronouns.
@@ -46,7 +47,7 @@ _BOUNDARY = frozenset(
 _NON_OBJECTS = frozenset(
     """left right side top bottom middle front back edge corner table counter way time contents content
     water liquid soup stuff one ones area spot place workspace dirt dust crumb crumbs trash mess debris
-    cork lid door what's what thing everything something nothing robot okay ok sure bit""".split()
+    cork lid door what thing everything something nothing robot okay ok sure bit""".split()
 )
 _COLLISION_VERBS = frozenset(
     "touch hit bump knock disturb topple collide crash brush graze nudge move tip spill".split()
@@ -93,12 +94,12 @@ def _matches(pattern: str, word: str) -> bool:
     return pattern == word
 
 
-class PhraseMatcher:
-    """Interface of the optional embedding matcher (see `lano3dp.language.embeddings`)."""
+class PhraseMatcher(Protocol):
+    """The optional embedding matcher (`lano3dp.language.embeddings.MiniLMMatcher`)."""
 
-    def best_match(self, query: str, candidates: Sequence[str]) -> tuple[int, float]:  # pragma: no cover
+    def best_match(self, query: str, candidates: Sequence[str]) -> tuple[int, float]:
         """Index of the candidate closest in meaning to `query`, and the cosine similarity."""
-        raise NotImplementedError
+        ...
 
 
 @dataclass

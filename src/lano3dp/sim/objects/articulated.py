@@ -294,7 +294,7 @@ def add_microwave(builder: SceneBuilder, name: str, position, yaw: float = 0.0, 
 
 # --------------------------------------------------------------------------------- phone and base
 
-PHONE_LENGTH, PHONE_WIDTH, PHONE_THICKNESS = 0.13, 0.06, 0.016
+PHONE_LENGTH, PHONE_WIDTH, PHONE_THICKNESS = 0.13, 0.06, 0.02
 BASE_CLEARANCE, BASE_PLATE, BASE_RIM_HEIGHT, BASE_RIM = 0.025, 0.008, 0.012, 0.012
 
 

@@ -3,7 +3,8 @@
 Layout: the drawer cabinet as in `open_drawer` (centre x in [0.36, 0.46], |y| in [0.04, 0.18],
 front towards +x, yaw in [-0.5, 0.5] rad) but open by 85-100% of its travel; an upright bottle
 (`primitives.add_bottle`, 19 cm tall at scale 1) on the other side of the table
-(x in [0.28, 0.58], y of the opposite sign, |y| in [0.12, 0.30]), clear of the drawer. As in
+(x in [0.28, 0.58], y of the opposite sign, |y| in [0.10, 0.32]), 5 cm clear of the
+drawer's footprint and of the pulled-out drawer. As in
 the paper the bottle's orientation does not change: it stays upright. Instance variation: bottle
 and drawer scaled 0.8 / 1.2 independently and recoloured.
 
@@ -26,7 +27,7 @@ from lano3dp.sim.objects.primitives import BOTTLE_BODY_HALF
 from lano3dp.sim.robot import HOME_POSITION, top_down
 from lano3dp.sim.tasks import register_task
 from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
-from lano3dp.sim.tasks.open_drawer import build_drawer, drawer_frame, sample_drawer
+from lano3dp.sim.tasks.open_drawer import build_drawer, drawer_frame, sample_beside, sample_drawer
 from lano3dp.sim.variations import Variation
 
 BOTTLE_COLORS = ("red", "blue", "orange", "purple")
@@ -35,6 +36,9 @@ BOTTLE_COLORS = ("red", "blue", "orange", "purple")
 BOTTLE_TOP_ABOVE_CENTRE = 0.134
 PALM_ABOVE_TCP = 0.05  # lowest palm point above the TCP for a top-down grasp (robot.GripperSpec)
 CARRY_CLEARANCE = 0.04  # bottle bottom above the cabinet top while carrying
+# Fingers pre-closed to a 4.4 cm gap around the 2.2 cm neck: closing from fully open, they hit the
+# thin neck fast enough to pass through it at a 4 ms physics step.
+PREGRASP_GRIP = 0.5
 
 
 def drawer_slot_centre(parts, origin: np.ndarray, rotation: np.ndarray, opening: float) -> np.ndarray:
@@ -72,10 +76,9 @@ class BottleInDrawer(Task):
         objects = sample_drawer(rng, variation, opening=(0.85, 1.0))
         scale = self.instance_scale(rng, variation)
         color = str(rng.choice(BOTTLE_COLORS)) if variation.has("instance") else "green"
-        side = -np.sign(objects["drawer"].position[1])
-        xy = np.array([rng.uniform(0.28, 0.58), side * rng.uniform(0.12, 0.30)])
-        objects["bottle"] = Placement("bottle", np.array([*xy, 0.0]), 0.0, color, scale,
-                                      primitives.FOOTPRINTS["bottle"] * scale)
+        radius = primitives.FOOTPRINTS["bottle"] * scale
+        xy = sample_beside(rng, objects, radius, (0.28, 0.58), (0.10, 0.32))
+        objects["bottle"] = Placement("bottle", np.array([*xy, 0.0]), 0.0, color, scale, radius)
         layout = Layout(seed=0, objects=objects)
         layout.set_names(self.object_slots, variation)
         return layout
@@ -106,7 +109,7 @@ class BottleInDrawer(Task):
         place = slot + np.array([0.0, 0.0, 0.005 + half + grasp_above_centre])
 
         plan = MotionPlan(HOME_POSITION, top_down())
-        plan.move_to(grasp + np.array([0, 0, 0.08]), ee_rotation)
+        plan.move_to(grasp + np.array([0, 0, 0.08]), ee_rotation, gripper=PREGRASP_GRIP)
         plan.move_to(grasp, speed=0.12)
         plan.hold(5, gripper=CLOSED)
         plan.move_to(np.array([*grasp[:2], carry_z]), speed=0.15)

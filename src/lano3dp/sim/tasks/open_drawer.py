@@ -5,9 +5,9 @@ Layout: a one-drawer cabinet (`objects.articulated.add_drawer`) with its centre 
 by a yaw in [-0.5, 0.5] rad; the drawer starts closed or up to 2 cm ajar. Instance
 variation: scale 0.8 / 1.2 and another colour.
 
-Expert: turn the fingers' closing axis along the pull direction, descend onto the handle bar
-with the gripper open (centred 1.2 cm outward of the bar so the inner finger clears the
-drawer front), close, pull straight out to 95% of the travel, release and lift.
+Expert: turn the fingers' closing axis along the pull direction, descend around the handle bar
+with the fingers half closed (so they fit between bar and drawer front), close, pull straight
+out to 95% of the travel, release and lift.
 
 Success: the drawer is out by at least 60% of its travel (8.4 cm at scale 1).
 
@@ -28,7 +28,10 @@ from lano3dp.sim.variations import Variation
 
 OPEN_FRACTION = 0.6  # success threshold, fraction of the drawer's travel
 DRAWER_COLORS = ("white", "blue", "green", "grey")
-HANDLE_OFFSET = 0.012  # grasp centre outward of the bar: the inner finger then clears the drawer front
+# Fingers pre-closed to a 4.4 cm gap before descending: centred on the bar, they then clear the
+# drawer front by 1.4 cm and reach the bar together. Fully open (9 cm) and offset outward instead,
+# the inner finger met the bar first and rammed the drawer shut before the outer one arrived.
+PREGRASP_GRIP = 0.5
 CLEARANCE_KEY = "drawer_clearance"  # layout entry that only reserves the pulled-out drawer's footprint
 
 
@@ -53,6 +56,19 @@ def sample_drawer(rng: np.random.Generator, variation: Variation, opening: tuple
     clearance = Placement("clearance", np.array([*front, 0.0]), yaw, color, scale,
                           float(np.hypot((reach - parts.depth / 2) / 2, parts.width / 2)) + 0.01)
     return {"drawer": cabinet, CLEARANCE_KEY: clearance}
+
+
+def sample_beside(rng: np.random.Generator, objects: dict[str, Placement], radius: float, x_range, y_range,
+                  margin: float = 0.05) -> np.ndarray:
+    """(2,) table position for a loose object of footprint `radius` on the side of the table (sign
+    of y) opposite the drawer, clear of every placed footprint by `margin` (room for the fingers)."""
+    side = -np.sign(objects["drawer"].position[1])
+    low, high = np.array([x_range[0], y_range[0]]), np.array([x_range[1], y_range[1]])
+    for _ in range(500):
+        xy = rng.uniform(low, high) * np.array([1.0, side])
+        if all(np.linalg.norm(xy - p.position[:2]) >= p.radius + radius + margin for p in objects.values()):
+            return xy
+    raise RuntimeError(f"no free table spot for an object of radius {radius:.3f} m beside the drawer")
 
 
 def build_drawer(builder, layout: Layout) -> None:
@@ -114,14 +130,14 @@ class OpenDrawer(Task):
         handle = origin + rotation @ np.array([parts.handle_x + drawer_opening(sim, layout), 0.0, parts.handle_z])
         # Closing axis (EE y = (sin psi, -cos psi, 0)) along the pull direction.
         ee_rotation = top_down(float(np.arctan2(pull[0], -pull[1])))
-        return handle + HANDLE_OFFSET * pull, ee_rotation, pull
+        return handle, ee_rotation, pull
 
     def plan_expert(self, sim: SimState | None, layout: Layout) -> MotionPlan:
         parts, _, _ = drawer_frame(layout)
         grasp, rotation, pull = self.handle_grasp(sim, layout)
         out = grasp + pull * max(0.0, 0.95 * parts.travel - drawer_opening(sim, layout))
         plan = MotionPlan(HOME_POSITION, top_down())
-        plan.move_to(grasp + np.array([0, 0, 0.10]), rotation)
+        plan.move_to(grasp + np.array([0, 0, 0.10]), rotation, gripper=PREGRASP_GRIP)
         plan.move_to(grasp, speed=0.15)
         plan.hold(5, gripper=CLOSED)
         plan.move_to(out, speed=0.12)

@@ -1,0 +1,117 @@
+"""close_microwave: push an open microwave door shut (RLBench `close_microwave`).
+
+Layout: a microwave-like box (`objects.articulated.add_microwave`: a static box, its door on a
+vertical hinge at the front-left edge) with its centre at x in [0.36, 0.48], y in [-0.10, 0.14],
+front turned towards the camera (+x) by a yaw in [-0.4, 0.4] rad; the door starts open by
+0.9-1.6 rad. Instance variation: scale 0.8 / 1.2 and another colour.
+
+Expert: with the fingers closed and their closing axis along the door, come down beside the
+door's outer face near its top edge (fingertips 4 cm below the door's top, so the palm passes
+above it), 60% of the way from the hinge to the free edge, then sweep along the circle the
+contact point travels (steps of ~0.15 rad, the hand turning with the door) to just past
+closed, and lift away.
+
+Success: the door angle is below 0.1 rad (~6 degrees).
+
+Differences from RLBench: a box primitive instead of the microwave mesh, and a free-floating
+gripper instead of an arm.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lano3dp.sim.experts import CLOSED, MotionPlan
+from lano3dp.sim.objects.articulated import MicrowaveParts, add_microwave
+from lano3dp.sim.robot import HOME_POSITION, GripperSpec, rot_z, top_down
+from lano3dp.sim.tasks import register_task
+from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.tasks.open_drawer import approach_clear_of
+from lano3dp.sim.variations import Variation
+
+CLOSED_ANGLE = 0.1  # rad, success threshold
+MICROWAVE_COLORS = ("grey", "red", "blue", "yellow")
+CONTACT_FRACTION = 0.6  # contact point along the door, from the hinge
+PUSH_DEPTH_BELOW_TOP = 0.03  # TCP below the door's top edge (fingertips 1 cm lower still)
+SWEEP_STEP = 0.15  # rad between sweep waypoints
+FINGER_HALF_WIDTH = GripperSpec().finger_half[0]  # pad half extent across the door when pushing
+CLEARANCE_KEY = "microwave_clearance"
+
+
+def door_point(parts: MicrowaveParts, origin: np.ndarray, rotation: np.ndarray, angle: float, along: float,
+               out: float) -> tuple[np.ndarray, np.ndarray]:
+    """World point at `along` m from the hinge along the door and `out` m off its outer face, at
+    z = 0, and the door's unit direction from the hinge (both (3,)), for door angle `angle`."""
+    hinge = origin + rotation @ parts.hinge_local
+    edge = rotation @ np.array([np.sin(angle), np.cos(angle), 0.0])
+    normal = rotation @ np.array([np.cos(angle), -np.sin(angle), 0.0])
+    return hinge + along * edge + out * normal, edge
+
+
+def yaw_along(direction: np.ndarray, previous: float | None = None) -> float:
+    """Yaw psi of `top_down(psi)` whose finger axis (sin psi, -cos psi) is parallel to `direction`;
+    of the two (the fingers are symmetric) the one nearest `previous`."""
+    psi = float(np.arctan2(direction[0], -direction[1]))
+    reference = 0.0 if previous is None else previous
+    return psi + np.pi * np.round((reference - psi) / np.pi)
+
+
+@register_task
+class CloseMicrowave(Task):
+    name = "close_microwave"
+    skill = "close_microwave"
+    object_slots = ("microwave",)
+    instruction = "close the {microwave}"
+    max_steps = 120
+
+    def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
+        scale = self.instance_scale(rng, variation)
+        color = str(rng.choice(MICROWAVE_COLORS)) if variation.has("instance") else "white"
+        xy = rng.uniform([0.36, -0.10], [0.48, 0.14])
+        yaw = float(rng.uniform(-0.4, 0.4))
+        angle = float(rng.uniform(0.9, 1.6))
+        parts = MicrowaveParts.of("microwave", scale)
+        box = Placement("microwave", np.array([*xy, 0.0]), yaw, color, scale,
+                        float(np.hypot(parts.depth, parts.width)) / 2 + 0.01, {"door_angle": angle})
+        # The open door and the hand beside it: a disc around the hinge.
+        hinge = np.array([*xy, 0.0]) + rot_z(yaw) @ parts.hinge_local
+        sweep = Placement("clearance", hinge, yaw, color, scale, parts.width + 0.06)
+        layout = Layout(seed=0, objects={"microwave": box, CLEARANCE_KEY: sweep})
+        layout.set_names(self.object_slots, variation)
+        return layout
+
+    def build(self, builder, layout: Layout) -> None:
+        box = layout.objects["microwave"]
+        add_microwave(builder, layout.names["microwave"], box.position, box.yaw, box.color, box.scale,
+                      door_angle=box.params["door_angle"])
+
+    def plan_expert(self, sim: SimState | None, layout: Layout) -> MotionPlan:
+        box = layout.objects["microwave"]
+        parts = MicrowaveParts.of(layout.names["microwave"], box.scale)
+        origin, rotation = np.asarray(box.position, float), rot_z(box.yaw)
+        angle = box.params["door_angle"] if sim is None else sim.joint_qpos(parts.joint)
+        along = CONTACT_FRACTION * parts.door_width
+        z = parts.height - PUSH_DEPTH_BELOW_TOP
+        touch = parts.door_thickness / 2 + FINGER_HALF_WIDTH  # pad face on the door's outer face
+
+        start, edge = door_point(parts, origin, rotation, angle, along, touch + 0.03)
+        psi = yaw_along(edge)
+        plan = MotionPlan(HOME_POSITION, top_down(), gripper=CLOSED)
+        plan.move_to(start + np.array([0, 0, z + 0.12]), top_down(psi))
+        plan.move_to(start + np.array([0, 0, z]), speed=0.15)
+        for target in np.linspace(angle, -0.02, max(2, int(np.ceil((angle + 0.02) / SWEEP_STEP))) + 1)[1:]:
+            point, edge = door_point(parts, origin, rotation, target, along, touch + 0.004)
+            psi = yaw_along(edge, psi)
+            plan.move_to(point + np.array([0, 0, z]), top_down(psi), speed=0.12)
+        plan.retreat(0.10)
+        return plan
+
+    def obstacle_region(self, layout: Layout) -> np.ndarray:
+        """The approach from home to above the door, where it is not over the microwave."""
+        path = self.nominal_path(layout)
+        box = layout.objects["microwave"]
+        return approach_clear_of(path[0], path[1], box.position, box.radius + 0.05)
+
+    def is_success(self, sim: SimState, layout: Layout) -> bool:
+        parts = MicrowaveParts.of(layout.names["microwave"], layout.objects["microwave"].scale)
+        return sim.joint_qpos(parts.joint) < CLOSED_ANGLE

@@ -1,0 +1,137 @@
+"""Contract tests shared by the RLBench-style tasks: the scripted expert solves seeded episodes,
+the task is not solved at reset, layouts are random per seed, and the instance variation
+really changes object sizes. Task-specific success checks are in `test_tasks_<name>.py`.
+
+Episodes run through `TabletopEnv` at 16x16 pixels: the physics is what is tested and the
+tiny render keeps an episode well under a second.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lano3dp.sim import TabletopEnv, make_task
+from lano3dp.sim.variations import Variation
+
+TASKS = ("open_drawer", "bottle_in_drawer", "close_microwave", "put_item_in_drawer", "phone_on_base")
+# Size measure per slot: the axis of the object's own bounding box that scales with the instance
+# (heights of cabinet, box, bottle and block scale exactly; the phone's and the base's thickness
+# does not, their length does).
+SIZE_AXIS = {"drawer": 2, "microwave": 2, "bottle": 2, "block": 2, "phone": 0, "base": 0}
+
+
+def make_env(task: str, variation: str | None = None) -> TabletopEnv:
+    return TabletopEnv(task, variation=variation, image_size=16, render_rgb=False)
+
+
+def run_expert(env: TabletopEnv, seed: int, extra_steps: int = 15) -> tuple[bool, bool, int]:
+    """(solved at reset, solved by the expert, steps) for one seeded episode."""
+    env.reset(seed=seed)
+    at_reset = bool(env.task.is_success(env.sim, env.episode.layout))
+    actions = env.expert_plan().actions()
+    actions = np.concatenate([actions, np.repeat(actions[-1:], extra_steps, axis=0)])
+    for step, action in enumerate(actions, start=1):
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated:
+            return at_reset, True, step
+        if truncated:
+            break
+    return at_reset, False, step
+
+
+def object_extent(env: TabletopEnv, name: str) -> np.ndarray:
+    """(3,) size (m) of the bounding box of all geoms of scene object `name`, in the frame of its first body."""
+    model, data = env.model, env.data
+    bodies = [model.body(b).id for b in env.objects[name].body_names]
+    frame_position, frame_rotation = data.xpos[bodies[0]], data.xmat[bodies[0]].reshape(3, 3)
+    corners = []
+    for geom in np.flatnonzero(np.isin(model.geom_bodyid, bodies)):
+        centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
+        signs = np.array(np.meshgrid([-1, 1], [-1, 1], [-1, 1])).reshape(3, -1).T
+        local = centre + signs * half
+        corners.append(data.geom_xpos[geom] + local @ data.geom_xmat[geom].reshape(3, 3).T)
+    corners = (np.concatenate(corners) - frame_position) @ frame_rotation
+    return corners.max(0) - corners.min(0)
+
+
+def size_measure(env: TabletopEnv, slot: str) -> float:
+    return float(object_extent(env, env.episode.layout.names[slot])[SIZE_AXIS[slot]])
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_expert_solves_clean_episodes_that_start_unsolved(task):
+    env = make_env(task)
+    try:
+        for seed in (0, 1, 2):
+            at_reset, solved, steps = run_expert(env, seed)
+            assert not at_reset, f"{task} seed {seed} is already solved at reset"
+            assert solved, f"{task} expert failed on seed {seed} ({steps} steps)"
+            assert steps <= env.max_steps
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_expert_solves_instance_and_clutter_variants(task):
+    env = make_env(task, "instance+clutter")
+    try:
+        for seed in (3, 4):
+            at_reset, solved, _ = run_expert(env, seed)
+            assert not at_reset and solved, f"{task} seed {seed}: at reset {at_reset}, solved {solved}"
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_layouts_differ_across_seeds(task):
+    t = make_task(task)
+    layouts = [t.sample_layout(np.random.default_rng(seed), Variation()) for seed in range(6)]
+    for slot in t.object_slots:
+        poses = np.array([[*layout.objects[slot].position[:2], layout.objects[slot].yaw] for layout in layouts])
+        distances = np.linalg.norm(poses[:, None, :2] - poses[None, :, :2], axis=-1)[np.triu_indices(6, 1)]
+        assert distances.min() > 0.002, f"{task}: two seeds put the {slot} at the same place"
+        assert np.ptp(poses[:, 0]) > 0.03 and np.ptp(poses[:, 1]) > 0.03
+    # The same seed gives the same layout.
+    again = t.sample_layout(np.random.default_rng(0), Variation())
+    for slot in t.object_slots:
+        np.testing.assert_allclose(again.objects[slot].position, layouts[0].objects[slot].position)
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_instance_variation_scales_the_task_objects(task):
+    """Clean scenes use scale 1; "instance" scenes 0.8 or 1.2, and the built geometry follows."""
+    clean, varied = make_env(task), make_env(task, "instance")
+    try:
+        clean.reset(seed=0)
+        reference = {slot: size_measure(clean, slot) for slot in clean.task.object_slots}
+        seen = set()
+        for seed in range(6):
+            varied.reset(seed=seed)
+            for slot in varied.task.object_slots:
+                scale = varied.episode.layout.objects[slot].scale
+                seen.add(scale)
+                ratio = size_measure(varied, slot) / reference[slot]
+                assert scale in (0.8, 1.2)
+                # Walls, handles and rims keep their size, so the ratio follows the scale only roughly.
+                assert abs(ratio - scale) < 0.08, f"{task} {slot}: scale {scale} but size ratio {ratio:.3f}"
+        assert seen == {0.8, 1.2}
+    finally:
+        clean.close()
+        varied.close()
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_slot_objects_carry_kind_colour_and_size_words(task):
+    env = make_env(task, "instance")
+    try:
+        env.reset(seed=1)
+        layout = env.episode.layout
+        for slot in env.task.object_slots:
+            attributes = env.instance_attributes[layout.names[slot]]
+            assert attributes["kind"] == layout.objects[slot].kind
+            assert attributes["color"] == layout.objects[slot].color
+            assert attributes["size"] in ("small", "large")
+            assert attributes["role"] == "target"
+    finally:
+        env.close()

@@ -49,7 +49,7 @@ WORKSPACE_HIGH = np.array([0.95, 0.55, 0.60])
 CAMERAS = {"front": FRONT_CAMERA, "shifted": SHIFTED_CAMERA}
 # Physics substeps between obstacle checks / mocap updates within one control step.
 _CHUNK = 5
-_SETTLE_STEPS = 150  # 0.3 s for objects to come to rest after building
+_SETTLE_STEPS = 75  # 0.3 s for objects to come to rest after building
 
 
 class InvalidActionError(Lano3dpError, ValueError):

@@ -135,11 +135,11 @@ def add_mug(builder, name, position, yaw=0.0, color="red", scale=1.0, role="dist
 
 
 def add_cube(builder, name, position, yaw=0.0, color="red", scale=1.0, role="distractor", free=True,
-             half_size=0.025, mass=0.08, friction=1.0) -> ObjectInfo:
+             half_size=0.025, mass=0.08, friction=1.0, solref_damping=1.0) -> ObjectInfo:
     h = half_size * scale
     body = _body(builder, name, _position(position, h), yaw_quat(yaw), free)
     body.add_geom(name=f"{name}/box", type=BOX, size=[h, h, h], rgba=rgba(color), mass=mass,
-                  friction=[friction, 0.005, 0.0001])
+                  friction=[friction, 0.005, 0.0001], solref=[0.02, solref_damping])
     info = ObjectInfo(name, "cube", color, size_word(scale), (name,), h * 1.5, np.array(body.pos), role,
                       np.array([h, h, h]))
     return builder.register(info)
@@ -164,24 +164,25 @@ def add_can(builder, name, position, yaw=0.0, color="orange", scale=1.0, role="d
 
 
 def add_ball(builder, name, position, yaw=0.0, color="purple", scale=1.0, role="distractor", free=True,
-             radius=0.03, mass=0.05, friction=0.8) -> ObjectInfo:
+             radius=0.03, mass=0.05, friction=0.8, solref_damping=1.0) -> ObjectInfo:
     r = radius * scale
     body = _body(builder, name, _position(position, r), yaw_quat(yaw), free)
     body.add_geom(name=f"{name}/ball", type=SPHERE, size=[r, 0, 0], rgba=rgba(color), mass=mass,
-                  friction=[friction, 0.005, 0.0002])
+                  friction=[friction, 0.005, 0.0002], solref=[0.02, solref_damping])
     info = ObjectInfo(name, "ball", color, size_word(scale), (name,), r + 0.005, np.array(body.pos), role,
                       np.array([r, r, r]))
     return builder.register(info)
 
 
 def add_item(builder, name, position, shape="sphere", color="yellow", scale=1.0, role="item") -> ObjectInfo:
-    """A small pourable item (sphere r 0.011 or cube half-side 0.0095, 10 g, low friction so it slides out)."""
+    """A small pourable item (sphere r 0.011 or cube half-side 0.0095, 10 g, low friction so it slides
+    out, over-damped contacts so it does not bounce out of the pan)."""
     if shape == "sphere":
         info = add_ball(builder, name, position, color=color, scale=scale, role=role, radius=0.011, mass=0.01,
-                        friction=0.3)
+                        friction=0.3, solref_damping=2.0)
     elif shape == "cube":
         info = add_cube(builder, name, position, color=color, scale=scale, role=role, half_size=0.0095, mass=0.01,
-                        friction=0.3)
+                        friction=0.3, solref_damping=2.0)
     else:
         raise ValueError(f"unknown item shape {shape!r}; use 'sphere' or 'cube'")
     info.kind = "item"

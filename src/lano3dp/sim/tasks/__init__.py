@@ -34,6 +34,7 @@ __all__ = ["TASKS", "Layout", "Placement", "SimState", "Task", "make_task", "reg
 # Task modules register themselves on import (one line per task).
 from lano3dp.sim.tasks import (  # noqa: E402,F401
     bottle_in_drawer,
+    bottle_upright,
     bowl_pour,
     close_microwave,
     open_drawer,

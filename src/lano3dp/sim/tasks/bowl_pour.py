@@ -28,8 +28,9 @@ from lano3dp.sim.variations import Variation
 
 CARRY_HEIGHT = 0.24
 TILT = np.deg2rad(150.0)
+POUR_ANGLE = np.deg2rad(100.0)  # tilt at which the items slide over the lip
 GRASP_DEPTH = 0.022  # TCP below the rim: the pads cover the upper ~3 cm of the wall
-PREGRASP_GRIP = 0.6  # partly closed: ~3.5 cm between the fingers, enough for the 8 mm wall
+PREGRASP_GRIP = 0.7  # partly closed: ~2.6 cm between the fingers, enough for the 8 mm wall
 ITEM_COLORS = ("yellow", "orange", "red", "green", "purple")
 
 
@@ -67,7 +68,7 @@ class BowlPour(Task):
         start_angle = rng.uniform(0, 2 * np.pi)
         for i in range(self.n_items):
             angle = start_angle + 2 * np.pi * i / self.n_items
-            xy = centre + 0.0135 * np.array([np.cos(angle), np.sin(angle)])
+            xy = centre + 0.016 * np.array([np.cos(angle), np.sin(angle)])
             shape = str(rng.choice(["sphere", "cube"]))
             objects[f"item{i}"] = Placement("item", np.array([*xy, 0.008 + 0.012]), 0.0,
                                             str(rng.choice(ITEM_COLORS)), 1.0, 0.0, {"shape": shape})
@@ -107,8 +108,9 @@ class BowlPour(Task):
         axis = np.cross(u, [0.0, 0.0, 1.0])  # tilting about it lowers the far (pan-side) lip
         tilt = rot_axis(axis, TILT)
         lip = -2 * radius * u + np.array([0, 0, 0.012])  # far lip relative to the TCP
-        lip_target = np.array([*pan.position[:2], PAN_WALL_HEIGHT + 0.05]) + 0.03 * u
-        pour_tcp = lip_target - tilt @ lip
+        # Items leave the bowl at about POUR_ANGLE: put the lip above the pan centre at that angle.
+        lip_target = np.array([*pan.position[:2], PAN_WALL_HEIGHT + 0.07])
+        pour_tcp = lip_target - rot_axis(axis, POUR_ANGLE) @ lip
         carry = np.array([*pour_tcp[:2], max(CARRY_HEIGHT, pour_tcp[2])])
 
         plan = MotionPlan(HOME_POSITION, top_down())

@@ -1,0 +1,107 @@
+"""bottle_upright: stand a bottle that lies on its side upright.
+
+Layout: the bottle lies with its axis along world +y (neck towards +y) turned by a yaw in
+[-0.3, 0.3] rad (the paper keeps the orientation fixed; a little yaw keeps the expert honest),
+centre x in [0.38, 0.56], y in [-0.12, 0.12]. Instance variation: scale 0.8 / 1.2 and colour.
+
+Expert: top-down grasp at the centre of mass with the fingers across the bottle, lift,
+rotate 90 degrees about the finger axis so the neck points up, lower until the bottom is
+5 mm above the table, open, back away along the (now horizontal) approach axis, rise.
+
+Success: the bottle axis is within 15 degrees of vertical with the neck up, it stands on the
+table (centre at its half height +- 1.5 cm), is not held, and moves slower than 5 cm/s.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lano3dp.sim.experts import CLOSED, OPEN, MotionPlan
+from lano3dp.sim.objects import primitives
+from lano3dp.sim.objects.primitives import BOTTLE_BODY_HALF, BOTTLE_RADIUS
+from lano3dp.sim.robot import HOME_POSITION, rot_axis, rot_z, top_down
+from lano3dp.sim.tasks import register_task
+from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.variations import Variation
+
+COM_OFFSET = 0.012  # centre of mass above the body centre along the bottle axis, metres at scale 1
+UPRIGHT_COS = np.cos(np.deg2rad(15.0))
+
+
+def lying_quat(yaw: float) -> np.ndarray:
+    """(w, x, y, z) turning the bottle axis (local z) to the horizontal direction Rz(yaw) (0, 1, 0)."""
+    import mujoco
+
+    rotation = rot_z(yaw) @ rot_axis([1.0, 0.0, 0.0], -np.pi / 2)
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, rotation.reshape(-1))
+    return quat
+
+
+@register_task
+class BottleUpright(Task):
+    name = "bottle_upright"
+    skill = "upright"
+    object_slots = ("bottle",)
+    instruction = "stand the {bottle} upright"
+    max_steps = 150
+    similar_slots = ("bottle",)
+
+    def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
+        scale = self.instance_scale(rng, variation)
+        color = str(rng.choice(["red", "blue", "orange", "purple"])) if variation.has("instance") else "green"
+        xy = rng.uniform([0.38, -0.12], [0.56, 0.12])
+        yaw = float(rng.uniform(-0.3, 0.3))
+        length = (BOTTLE_BODY_HALF + 0.08) * scale
+        placement = Placement("bottle", np.array([*xy, BOTTLE_RADIUS * scale]), yaw, color, scale, length + 0.02)
+        layout = Layout(seed=0, objects={"bottle": placement})
+        layout.set_names(self.object_slots, variation)
+        return layout
+
+    def build(self, builder, layout: Layout) -> None:
+        bottle = layout.objects["bottle"]
+        primitives.add_bottle(builder, layout.names["bottle"], bottle.position, color=bottle.color,
+                              scale=bottle.scale, quat=lying_quat(bottle.yaw))
+
+    def plan_expert(self, sim: SimState | None, layout: Layout) -> MotionPlan:
+        bottle = layout.objects["bottle"]
+        scale = bottle.scale
+        if sim is None:
+            centre = bottle.position
+            axis = rot_z(bottle.yaw) @ np.array([0.0, 1.0, 0.0])
+        else:
+            centre = sim.body_position(layout.names["bottle"])
+            axis = sim.body_rotation(layout.names["bottle"])[:, 2]
+            axis = np.array([axis[0], axis[1], 0.0]) / max(np.linalg.norm(axis[:2]), 1e-9)
+        finger_axis = np.cross([0.0, 0.0, 1.0], axis)
+        grasp_rotation = top_down(np.arctan2(finger_axis[0], -finger_axis[1]))
+        grasp = centre + COM_OFFSET * scale * axis
+        grasp[2] = BOTTLE_RADIUS * scale
+        upright_rotation = rot_axis(finger_axis, -np.pi / 2) @ grasp_rotation
+        bottom_below_tcp = (BOTTLE_BODY_HALF + COM_OFFSET) * scale
+        lift = np.array([*grasp[:2], bottom_below_tcp + BOTTLE_RADIUS * scale + 0.06])
+        place = np.array([*grasp[:2], bottom_below_tcp + 0.005])
+
+        plan = MotionPlan(HOME_POSITION, top_down())
+        plan.grasp(grasp, grasp_rotation, approach=0.10, lift=lift[2] - grasp[2])
+        plan.move_to(lift, upright_rotation)
+        plan.move_to(place, speed=0.1)
+        plan.hold(5, gripper=OPEN)
+        approach = upright_rotation[:, 2]
+        plan.move_to(place - 0.10 * approach, speed=0.15)
+        plan.move_to(place - 0.10 * approach + np.array([0, 0, 0.1]))
+        plan.hold(5)
+        assert plan.last.gripper == OPEN and CLOSED == 1.0
+        return plan
+
+    def is_success(self, sim: SimState, layout: Layout) -> bool:
+        name = layout.names["bottle"]
+        scale = layout.objects["bottle"].scale
+        axis = sim.body_rotation(name)[:, 2]
+        centre = sim.body_position(name)
+        return bool(
+            axis[2] > UPRIGHT_COS
+            and abs(centre[2] - BOTTLE_BODY_HALF * scale) < 0.015
+            and sim.held_object() != name
+            and np.linalg.norm(sim.body_velocity(name)[3:]) < 0.05
+        )

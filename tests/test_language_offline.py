@@ -11,6 +11,7 @@ from lano3dp.language import (
     SlotMismatchError,
     UnknownObjectError,
 )
+from lano3dp.language.registry import describe_scene
 
 DATA = Path(__file__).parent / "data"
 
@@ -125,3 +126,17 @@ def test_plans_are_validated_against_the_registry(decomposer):
     assert decomposer.registry.validate(plan) is plan
     with pytest.raises(SlotMismatchError):
         decomposer.registry.validate(plan.model_copy(update={"targets": plan.targets[:1]}))
+
+
+def test_scene_given_as_frame_attributes_knows_colours_names_do_not_spell(decomposer):
+    scene = {
+        "bowl": {"kind": "bowl", "color": "blue", "size": "medium", "role": "target"},
+        "pan": {"kind": "pan", "color": "black", "size": "medium", "role": "target"},
+        "distractor_mug_2": {"kind": "mug", "color": "white", "size": "medium", "role": "distractor"},
+    }
+    plan = decomposer.decompose("pour the blue bowl into the pan and avoid the white mug", scene)
+    assert plan.target_phrases == ["blue bowl", "pan"] and plan.obstacle_phrases == ["white mug"]
+    with pytest.raises(UnknownObjectError, match="target 'blue bowl' is not in the scene"):
+        decomposer.decompose("pour the blue bowl into the pan and avoid the white mug", list(scene))  # names only
+    described = ["bowl (medium blue bowl)", "pan (medium black pan)", "distractor_mug_2 (medium white mug)"]
+    assert describe_scene(scene) == described

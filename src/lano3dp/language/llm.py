@@ -12,7 +12,6 @@ import json
 import os
 import re
 import warnings
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
@@ -21,7 +20,7 @@ from pydantic import ValidationError
 from lano3dp.language.exceptions import LanguageError, PlanValidationError
 from lano3dp.language.offline import OfflineDecomposer
 from lano3dp.language.plan import TaskPlan, plan_json_schema
-from lano3dp.language.registry import SkillRegistry, default_registry
+from lano3dp.language.registry import SceneObjects, SkillRegistry, default_registry, describe_scene
 
 _FENCE = re.compile(r"^\s*```(?:json)?\s*(.*?)\s*```\s*$", re.DOTALL)
 
@@ -161,15 +160,15 @@ class LLMDecomposer:
             )
         return self._client
 
-    def decompose(self, instruction: str, scene_objects: Sequence[str] | None = None) -> TaskPlan:
+    def decompose(self, instruction: str, scene_objects: SceneObjects | None = None) -> TaskPlan:
         return self.decompose_with_report(instruction, scene_objects).plan
 
-    def decompose_with_report(self, instruction: str, scene_objects: Sequence[str] | None = None) -> PlanOutcome:
+    def decompose_with_report(self, instruction: str, scene_objects: SceneObjects | None = None) -> PlanOutcome:
         import openai
 
         user = f"Instruction: {instruction}"
         if scene_objects is not None:
-            user += f"\nObjects in the scene (use only these): {', '.join(scene_objects)}"
+            user += f"\nObjects in the scene (use only these): {', '.join(describe_scene(scene_objects))}"
         messages = [{"role": "system", "content": system_prompt(self.registry)}, {"role": "user", "content": user}]
         errors: list[str] = []
         replies: list[str] = []

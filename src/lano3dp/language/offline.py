@@ -27,7 +27,14 @@ from typing import Protocol
 
 from lano3dp.language.exceptions import InstructionNotUnderstoodError, UnknownObjectError
 from lano3dp.language.plan import ObjectRef, TaskPlan
-from lano3dp.language.registry import SkillRegistry, SkillSpec, Slot, default_registry, scene_vocabulary
+from lano3dp.language.registry import (
+    SceneObjects,
+    SkillRegistry,
+    SkillSpec,
+    Slot,
+    default_registry,
+    scene_vocabulary,
+)
 from lano3dp.perception.sim_oracle import COLOURS, SIZE_WORDS, canonical_attribute, resolve_phrase, singular
 
 _WORD = re.compile(r"[a-z]+(?:'[a-z]+)?|[.,;:!?]")
@@ -153,9 +160,10 @@ class OfflineDecomposer:
 
     # ---- public API -------------------------------------------------------------------------
 
-    def decompose(self, instruction: str, scene_objects: Sequence[str] | None = None) -> TaskPlan:
-        """Plan for `instruction`; with `scene_objects` (names like "red_bowl"), objects are checked
-        against (and synonyms mapped onto) the scene.
+    def decompose(self, instruction: str, scene_objects: SceneObjects | None = None) -> TaskPlan:
+        """Plan for `instruction`; with `scene_objects` (names like "red_bowl", or a name -> attributes
+        mapping such as `frame.instance_attributes`), objects are checked against (and synonyms mapped
+        onto) the scene.
 
         Raises:
             InstructionNotUnderstoodError: no skill, or two equally likely skills.
@@ -169,7 +177,7 @@ class OfflineDecomposer:
             plan = self._ground_in_scene(plan, skill, scene_objects)
         return self.registry.validate(plan, scene_objects)
 
-    def ground(self, plan: TaskPlan, scene_objects: Sequence[str]) -> TaskPlan:
+    def ground(self, plan: TaskPlan, scene_objects: SceneObjects) -> TaskPlan:
         """`plan` with targets and obstacles renamed to the scene's object kinds where a slot synonym
         (or the embedding matcher) says they mean the same ("skillet" -> the scene's "pan").
 
@@ -182,7 +190,7 @@ class OfflineDecomposer:
             return plan  # validation reports the count mismatch with the slot words
         return self._ground_in_scene(plan, skill, scene_objects)
 
-    def parse(self, instruction: str, scene_objects: Sequence[str] | None = None) -> Parse:
+    def parse(self, instruction: str, scene_objects: SceneObjects | None = None) -> Parse:
         words = []
         for word in _WORD.findall(instruction.lower().replace("’", "'")):
             # "bowl's" -> bowl 's, "there's" -> there 's: the noun stays a noun.
@@ -465,7 +473,7 @@ class OfflineDecomposer:
             targets.append(noun.ref(None if keep_own_name else slot.word))
         return targets
 
-    def _ground_in_scene(self, plan: TaskPlan, skill: SkillSpec, scene_objects: Sequence[str]) -> TaskPlan:
+    def _ground_in_scene(self, plan: TaskPlan, skill: SkillSpec, scene_objects: SceneObjects) -> TaskPlan:
         """Rename targets and obstacles to scene kinds where the words differ but mean the same."""
         objects = scene_vocabulary(scene_objects)
         kinds = list(dict.fromkeys(" ".join(o.kind) for o in objects))

@@ -9,14 +9,14 @@ policy its objects swapped.
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 from lano3dp.language.exceptions import SlotMismatchError, UnknownObjectError, UnknownSkillError
 from lano3dp.language.plan import TaskPlan
-from lano3dp.perception.sim_oracle import SceneObject, resolve_phrase, singular
+from lano3dp.perception.sim_oracle import COLOURS, SIZE_WORDS, SceneObject, resolve_phrase, singular
 
 
 def _normalise_words(words: Iterable[str]) -> tuple[str, ...]:
@@ -111,15 +111,15 @@ class SkillRegistry:
         skill = self.get(name).model_copy(update={"checkpoint": Path(path)})
         return SkillRegistry(skill if s.name == name else s for s in self)
 
-    def validate(self, plan: TaskPlan, scene_objects: Sequence[str] | None = None) -> TaskPlan:
+    def validate(self, plan: TaskPlan, scene_objects: SceneObjects | None = None) -> TaskPlan:
         """Check `plan` against the registry (and the scene, if given); returns it unchanged.
 
         Raises:
             UnknownSkillError: the skill is not registered.
             SlotMismatchError: wrong number of targets, or a target that names another slot's
                 object (targets out of slot order).
-            UnknownObjectError: with `scene_objects` (scene object names such as "red_bowl"),
-                a target or obstacle that matches none of them.
+            UnknownObjectError: with `scene_objects` (names such as "red_bowl", or a name -> attributes
+                mapping such as `frame.instance_attributes`), a target or obstacle that matches none of them.
         """
         skill = self.get(plan.skill)
         got = plan.target_phrases
@@ -149,9 +149,27 @@ class SkillRegistry:
         return cls.from_json(Path(path).read_text())
 
 
-def scene_vocabulary(scene_objects: Sequence[str] | Sequence[SceneObject]) -> list[SceneObject]:
-    """Scene objects from names ("red_bowl", "pan") or ready `SceneObject`s."""
+# What a caller may pass as "the scene": object names ("red_bowl", "pan"), a name -> attributes
+# mapping (`RGBDFrame.instance_attributes`: {"item0": {"kind": "item", "color": "red"}}), or SceneObjects.
+SceneObjects = Sequence[str] | Mapping[str, Mapping[str, str]] | Sequence[SceneObject]
+
+
+def scene_vocabulary(scene_objects: SceneObjects) -> list[SceneObject]:
+    """Scene objects from names, a name -> attributes mapping, or ready `SceneObject`s. Names alone
+    carry only what they spell ("red_bowl": a red bowl); the mapping also knows "item0" is a red item."""
+    if isinstance(scene_objects, Mapping):
+        return [SceneObject.from_frame_entry(str(n), a) for n, a in scene_objects.items()]
     return [o if isinstance(o, SceneObject) else SceneObject.from_frame_entry(str(o), None) for o in scene_objects]
+
+
+def describe_scene(scene_objects: SceneObjects) -> list[str]:
+    """One line per object for prompts and messages: "item0 (red item)"."""
+    out = []
+    for obj in scene_vocabulary(scene_objects):
+        ordered = sorted(obj.attributes, key=lambda w: (w not in SIZE_WORDS.values(), w not in COLOURS, w))
+        words = " ".join([*ordered, *obj.kind])
+        out.append(f"{obj.name} ({words})" if words and words != obj.name.replace("_", " ") else obj.name)
+    return out
 
 
 def _slot(word: str, *synonyms: str, accepts_any: bool = False) -> Slot:

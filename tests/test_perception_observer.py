@@ -64,9 +64,9 @@ def test_object_with_too_few_valid_points_is_named():
     keep = np.flatnonzero(bowl_pixels)[:5]
     frame.depth[bowl_pixels] = 0.0
     frame.depth.flat[keep] = 0.9
-    with pytest.raises(TooFewPointsError, match="'red bowl' has 5 valid depth points") as info:
+    with pytest.raises(TooFewPointsError, match=r"'red bowl \[red_bowl\]' has 5 valid depth points") as info:
         ObjectObserver(SimOracleSegmenter(), min_points=10).observe(frame, ["pan", "red bowl"])
-    assert info.value.name == "red bowl" and isinstance(info.value, EmptyCloudError)
+    assert info.value.name == "red bowl [red_bowl]" and isinstance(info.value, EmptyCloudError)
 
 
 def test_crop_box_removes_objects_outside_the_workspace():

@@ -151,7 +151,9 @@ class ObjectObserver:
         if self.crop_low is not None:
             points = crop_to_box(points, self.crop_low, self.crop_high)
         if len(points) < self.min_points:
-            raise TooFewPointsError(result.phrase, len(points), self.min_points)
+            same = result.matched_name in (None, result.phrase)
+            label = result.phrase if same else f"{result.phrase} [{result.matched_name}]"
+            raise TooFewPointsError(label, len(points), self.min_points)
         return farthest_point_sample(points, self.n_points, seed=self.seed, name=result.phrase), len(points)
 
 

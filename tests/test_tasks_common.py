@@ -135,3 +135,23 @@ def test_slot_objects_carry_kind_colour_and_size_words(task):
             assert attributes["role"] == "target"
     finally:
         env.close()
+
+
+def teleport(env: TabletopEnv, body: str, position, quat=(1.0, 0.0, 0.0, 0.0), settle_steps: int = 100) -> None:
+    """Put a free body at `position` (3,) with orientation `quat` (wxyz), at rest, then let physics run."""
+    import mujoco
+
+    joint = env.model.body(body).jntadr[0]
+    address, dof = env.model.jnt_qposadr[joint], env.model.jnt_dofadr[joint]
+    env.data.qpos[address:address + 7] = [*position, *quat]
+    env.data.qvel[dof:dof + 6] = 0.0
+    mujoco.mj_forward(env.model, env.data)
+    mujoco.mj_step(env.model, env.data, nstep=settle_steps)
+
+
+def set_joint(env: TabletopEnv, joint: str, value: float) -> None:
+    import mujoco
+
+    env.data.qpos[env.model.joint(joint).qposadr[0]] = value
+    env.data.qvel[env.model.joint(joint).dofadr[0]] = 0.0
+    mujoco.mj_forward(env.model, env.data)

@@ -21,13 +21,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from lano3dp.sim.experts import CLOSED, MotionPlan
+from lano3dp.sim.experts import MotionPlan
 from lano3dp.sim.objects import primitives
 from lano3dp.sim.objects.primitives import BOTTLE_BODY_HALF
 from lano3dp.sim.robot import HOME_POSITION, top_down
 from lano3dp.sim.tasks import register_task
 from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
-from lano3dp.sim.tasks.open_drawer import build_drawer, drawer_frame, sample_beside, sample_drawer
+from lano3dp.sim.tasks.open_drawer import build_drawer, close_gently, drawer_frame, sample_beside, sample_drawer
 from lano3dp.sim.variations import Variation
 
 BOTTLE_COLORS = ("red", "blue", "orange", "purple")
@@ -111,7 +111,7 @@ class BottleInDrawer(Task):
         plan = MotionPlan(HOME_POSITION, top_down())
         plan.move_to(grasp + np.array([0, 0, 0.08]), ee_rotation, gripper=PREGRASP_GRIP)
         plan.move_to(grasp, speed=0.12)
-        plan.hold(5, gripper=CLOSED)
+        close_gently(plan, PREGRASP_GRIP)
         plan.move_to(np.array([*grasp[:2], carry_z]), speed=0.15)
         plan.move_to(np.array([*place[:2], carry_z]), speed=0.2)
         plan.move_to(place, speed=0.12)

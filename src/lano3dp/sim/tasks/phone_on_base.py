@@ -24,12 +24,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from lano3dp.sim.experts import CLOSED, MotionPlan
+from lano3dp.sim.experts import MotionPlan
 from lano3dp.sim.objects.articulated import PhoneBaseParts, PhoneParts, add_phone, add_phone_base
 from lano3dp.sim.robot import HOME_POSITION, rot_z, top_down
 from lano3dp.sim.tasks import register_task
 from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
 from lano3dp.sim.tasks.close_microwave import yaw_along
+from lano3dp.sim.tasks.open_drawer import close_gently
 from lano3dp.sim.variations import Variation
 
 PHONE_COLORS = ("white", "red", "blue", "pink")
@@ -97,7 +98,7 @@ class PhoneOnBase(Task):
         plan = MotionPlan(HOME_POSITION, top_down())
         plan.move_to(grasp + np.array([0, 0, 0.08]), top_down(grasp_yaw))
         plan.move_to(grasp, speed=0.12)
-        plan.hold(5, gripper=CLOSED)
+        close_gently(plan, 0.0)
         plan.move_to(np.array([*grasp[:2], CARRY_HEIGHT]), speed=0.15)
         plan.move_to(np.array([*place[:2], CARRY_HEIGHT]), top_down(place_yaw), speed=0.2)
         plan.move_to(place, speed=0.1)

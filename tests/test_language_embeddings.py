@@ -44,3 +44,29 @@ def test_unknown_noun_maps_to_the_nearest_scene_object(matcher):
         OfflineDecomposer().decompose("Pour the bowl into the pan, avoid the mug", ["bowl", "pan", "cup"])
     vectors = matcher.embed(["pour", "pour"])
     assert vectors.shape == (2, 384) and abs(float(vectors[0] @ vectors[1]) - 1.0) < 1e-5
+
+
+def test_paraphrase_table_rules_versus_minilm(matcher):
+    """Verbs outside the lexicon: what the optional matcher adds (measured, printed, not tuned for)."""
+    import json
+    from pathlib import Path
+
+    cases = json.loads((Path(__file__).parent / "data" / "instructions_paraphrase.json").read_text())["cases"]
+
+    def exact(decomposer):
+        hits = 0
+        for case in cases:
+            try:
+                plan = decomposer.decompose(case["instruction"])
+            except InstructionNotUnderstoodError:
+                continue
+            hits += (plan.skill, plan.target_phrases, plan.obstacle_phrases) == (
+                case["skill"],
+                case["targets"],
+                case["obstacles"],
+            )
+        return hits
+
+    rules, minilm = exact(OfflineDecomposer()), exact(OfflineDecomposer(matcher=matcher))
+    print(f"\nparaphrase table ({len(cases)}): rules {rules}, rules + MiniLM {minilm} exact plans")
+    assert minilm >= rules >= len(cases) // 3

@@ -435,3 +435,17 @@ def test_every_instance_of_an_obstacle_phrase_gets_its_own_mask(weights):
     assert [r.matched_name for r in instances] == [f"blue cup#{i}" for i in range(len(instances))]
     clouds = ObjectObserver(segmenter, n_points=16, min_points=1).observe_instances(frame, ["blue cup"])
     assert clouds.points.shape[0] == len(instances) >= 1
+
+
+def test_factory_builds_open_vocab_and_tracking_segmenters_from_folders(weights, tmp_path):
+    from lano3dp.perception import SegmenterConfig, build_segmenter
+
+    common = dict(detector_dir=weights["grounding_dino"], sam_dir=weights["sam"], box_threshold=0.2)
+    open_vocab = build_segmenter(SegmenterConfig(kind="open_vocab", **common))
+    assert isinstance(open_vocab, OpenVocabSegmenter) and open_vocab.detector.box_threshold == 0.2
+    tracking = build_segmenter(SegmenterConfig(kind="tracking", tracker_dir=weights["sam2_video"], **common))
+    assert isinstance(tracking, TrackingSegmenter) and isinstance(tracking.initial, OpenVocabSegmenter)
+    with pytest.raises(MissingWeightsError, match="OWLv2 weights not found"):
+        build_segmenter(
+            SegmenterConfig(kind="open_vocab", detector="owlv2", detector_dir=tmp_path / "x", sam_dir=tmp_path)
+        )

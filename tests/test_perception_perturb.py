@@ -94,3 +94,17 @@ def test_instances_are_perturbed_one_by_one():
     h, w = bbox_size(BOWL_MASK)
     assert eroded.matched_name == "bowl" and eroded.mask.sum() == (h - 4) * (w - 4)
     assert perturbed(miss_probability=1.0).segment_instances(FRAME, "bowl") == []
+
+
+def test_factory_builds_the_oracle_with_optional_perturbation():
+    from lano3dp.perception import SegmenterConfig, build_segmenter
+
+    plain = build_segmenter(SegmenterConfig(ambiguity="largest"))
+    assert isinstance(plain, SimOracleSegmenter) and plain.ambiguity == "largest"
+    noisy = build_segmenter(SegmenterConfig(perturbation=MaskPerturbation(dilate_px=2, seed=3)))
+    assert isinstance(noisy, PerturbedSegmenter) and noisy.perturbation.dilate_px == 2
+    assert isinstance(build_segmenter(SegmenterConfig(perturbation=MaskPerturbation())), SimOracleSegmenter)
+    with pytest.raises(ValueError, match="needs local weight folders for: detector_dir, sam_dir, tracker_dir"):
+        build_segmenter(SegmenterConfig(kind="tracking"))
+    with pytest.raises(ValueError, match="kind must be"):
+        build_segmenter(SegmenterConfig(kind="magic"))

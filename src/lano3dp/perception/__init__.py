@@ -12,6 +12,7 @@ from lano3dp.perception.exceptions import (
     PerceptionError,
     TooFewPointsError,
 )
+from lano3dp.perception.factory import SegmenterConfig, build_segmenter
 from lano3dp.perception.observer import ObjectClouds, ObjectObserver, scene_cloud
 from lano3dp.perception.perturb import MaskPerturbation, PerturbedSegmenter
 from lano3dp.perception.sim_oracle import SimOracleSegmenter, resolve_phrase
@@ -28,8 +29,10 @@ __all__ = [
     "PerceptionError",
     "PerturbedSegmenter",
     "Segmenter",
+    "SegmenterConfig",
     "SimOracleSegmenter",
     "TooFewPointsError",
+    "build_segmenter",
     "resolve_phrase",
     "scene_cloud",
 ]

@@ -4,6 +4,18 @@ This is the paper's perception at the start of a recording or a rollout (Groundi
 SAM prompts); `tracker.TrackingSegmenter` then follows the masks from frame to frame. Models load
 only from local folders given by the user (`from_pretrained(dir)`); nothing is fetched from the
 hub. transformers is imported lazily, so importing this module is cheap.
+
+Preparing the folders on a machine with internet access (then copy them over):
+
+    from transformers import (GroundingDinoForObjectDetection, GroundingDinoProcessor,
+                              SamModel, SamProcessor, Sam2VideoModel)
+    for cls in (GroundingDinoForObjectDetection, GroundingDinoProcessor):
+        cls.from_pretrained("IDEA-Research/grounding-dino-tiny").save_pretrained("weights/grounding-dino-tiny")
+    for cls in (SamModel, SamProcessor):
+        cls.from_pretrained("facebook/sam-vit-base").save_pretrained("weights/sam-vit-base")
+    Sam2VideoModel.from_pretrained("facebook/sam2.1-hiera-tiny").save_pretrained("weights/sam2.1-hiera-tiny")
+
+Without torchvision the processors fall back to their PIL versions (same outputs, a warning).
 """
 
 from __future__ import annotations

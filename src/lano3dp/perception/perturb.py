@@ -11,13 +11,12 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from lano3dp.geometry.frame import RGBDFrame
 from lano3dp.perception.base import InstanceSegmenter, MaskResult, Segmenter
 
 # 4-connected structuring element: each iteration moves the boundary by one pixel.
-_CROSS = ndimage.generate_binary_structure(2, 1)
+_CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], dtype=bool)
 
 
 @dataclass(frozen=True)
@@ -54,6 +53,8 @@ class MaskPerturbation:
         """Perturbed copy of an (H, W) bool mask, or None when the object is missed or erased."""
         if self.miss_probability and rng.random() < self.miss_probability:
             return None
+        from scipy import ndimage  # the "perception" extra; imported here so the package imports without it
+
         out = np.asarray(mask, dtype=bool)
         if self.erode_px:
             out = ndimage.binary_erosion(out, _CROSS, iterations=self.erode_px)

@@ -390,15 +390,28 @@ def test_tracking_segmenter_detects_once_tracks_and_redetects_when_lost():
     frame = scene()
     initial, tracker = CountingOracle(), ScriptedTracker(lost_on={3})
     segmenter = TrackingSegmenter(initial, tracker)
-    results = [segmenter.segment(frame, ["red bowl", "pan"]) for _ in range(5)]
+    results = [segmenter.segment(scene(), ["red bowl", "pan"]) for _ in range(5)]
     assert initial.calls == 2 and tracker.starts == 2 and segmenter.redetections == 1
     assert all(r.found for frame_results in results for r in frame_results)
     assert results[1][0].score == pytest.approx(0.9)  # a tracked frame
-    segmenter.segment(frame, ["pan"])  # new phrases: detect again
-    assert initial.calls == 3
     segmenter.reset()
     segmenter.segment(frame, ["pan"])
-    assert initial.calls == 4
+    assert initial.calls == 3
+
+
+def test_targets_and_obstacles_share_one_session_and_one_step_per_frame():
+    initial, tracker = CountingOracle(), ScriptedTracker()
+    segmenter = TrackingSegmenter(initial, tracker)
+    first = scene()
+    segmenter.segment(first, ["red bowl"])  # targets
+    segmenter.segment(first, ["pan"])  # obstacles: a new phrase, detected with the targets
+    assert initial.calls == 2 and set(tracker.masks) == {"red bowl", "pan"}
+    for _ in range(3):
+        frame = scene()
+        targets = segmenter.segment(frame, ["red bowl"])
+        obstacles = segmenter.segment(frame, ["pan"])
+        assert targets[0].found and obstacles[0].found
+    assert initial.calls == 2 and tracker.frames == 3  # one tracking step per frame, no re-detection
 
 
 def test_real_tracker_behind_the_segmenter_protocol(weights):

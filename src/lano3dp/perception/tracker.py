@@ -145,33 +145,49 @@ class VideoTracker:
 class TrackingSegmenter:
     """Segmenter that detects once and tracks afterwards (the paper's GroundingDINO + SAM -> Cutie).
 
-    The first call, a call with different phrases, or a frame where any object is lost runs
-    `initial` (e.g. `OpenVocabSegmenter`) and restarts the tracker from its masks; other frames
-    are tracked. Call `reset()` between episodes.
+    One tracking session covers every phrase asked for so far, so a runtime that asks for its
+    targets and then its obstacles on the same frame tracks that frame once (the result is cached
+    for the frame object) instead of restarting. The first frame, a frame that brings new phrases,
+    and a frame where any tracked object is lost go through `initial` (e.g. `OpenVocabSegmenter`)
+    for all session phrases, and the tracker restarts from those masks. Call `reset()` between
+    episodes.
     """
 
     def __init__(self, initial: Segmenter, tracker: VideoTracker):
         self.initial = initial
         self.tracker = tracker
-        self._phrases: tuple[str, ...] | None = None
+        self._phrases: tuple[str, ...] = ()
+        self._last_frame: RGBDFrame | None = None
+        self._last: dict[str, MaskResult] = {}
         self.redetections = 0
 
     def reset(self) -> None:
         self.tracker.reset()
-        self._phrases = None
+        self._phrases = ()
+        self._last_frame = None
+        self._last = {}
 
     def segment(self, frame: RGBDFrame, phrases: Sequence[str]) -> list[MaskResult]:
         phrases = tuple(phrases)
-        if self.tracker.started and phrases == self._phrases:
+        if frame is self._last_frame and all(p in self._last for p in phrases):
+            return [self._last[p] for p in phrases]
+        known = self.tracker.started and set(phrases) <= set(self._phrases)
+        if known:
             tracked = self.tracker.track(frame.rgb)
-            if all(tracked[p].mask is not None for p in phrases):
-                return [MaskResult(p, tracked[p].mask, tracked[p].score, True, p) for p in phrases]
+            if all(t.mask is not None for t in tracked.values()):
+                self._remember(frame, [MaskResult(p, t.mask, t.score, True, p) for p, t in tracked.items()])
+                return [self._last[p] for p in phrases]
             self.redetections += 1
-        results = self.initial.segment(frame, phrases)
-        found = {r.phrase: r.mask for r in results if r.found}
-        if len(found) == len(set(phrases)):
-            self.tracker.start(frame.rgb, found)
-            self._phrases = phrases
+        wanted = tuple(dict.fromkeys((*self._phrases, *phrases)))
+        results = self.initial.segment(frame, wanted)
+        self._phrases = wanted
+        if all(r.found for r in results):
+            self.tracker.start(frame.rgb, {r.phrase: r.mask for r in results})
         else:
-            self.reset()  # an object is missing: keep detecting until all are seen
-        return results
+            self.tracker.reset()  # something is missing: detect again on the next frame
+        self._remember(frame, results)
+        return [self._last[p] for p in phrases]
+
+    def _remember(self, frame: RGBDFrame, results: Sequence[MaskResult]) -> None:
+        self._last_frame = frame
+        self._last = {r.phrase: r for r in results}

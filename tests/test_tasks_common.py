@@ -14,7 +14,8 @@ import pytest
 from lano3dp.sim import TabletopEnv, make_task
 from lano3dp.sim.variations import Variation
 
-TASKS = ("open_drawer", "bottle_in_drawer", "close_microwave", "put_item_in_drawer", "phone_on_base")
+TASKS = ("open_drawer", "bottle_in_drawer", "close_microwave", "put_item_in_drawer", "phone_on_base",
+         "open_wine_bottle")
 # Size measure per slot: the axis of the object's own bounding box that scales with the instance
 # (heights of cabinet, box, bottle and block scale exactly; the phone's and the base's thickness
 # does not, their length does).

@@ -389,3 +389,91 @@ def add_phone_base(builder: SceneBuilder, name: str, position, yaw: float = 0.0,
     info = ObjectInfo(name, "base", color, size_word(scale), p.bodies, float(np.hypot(*half[:2])),
                       np.array(body.pos), role, half)
     return builder.register(info)
+
+
+# ------------------------------------------------------------------------------ wine bottle + cap
+
+WINE_RADIUS, WINE_BODY_HALF, WINE_NECK_RADIUS, WINE_NECK_HALF = 0.035, 0.085, 0.012, 0.035
+CAP_RADIUS, CAP_HALF, CAP_TRAVEL = 0.016, 0.015, 0.06
+WINE_MASS, CAP_FRICTION = 1.0, 3.0  # kg, N: pulling the cap must not lift the bottle (9.8 N)
+
+
+@dataclass(frozen=True)
+class WineBottleParts:
+    """A wine bottle standing upright with a cap that slides off along the bottle's axis (metres).
+
+    Bottle frame: origin at the bottle's bottom centre, z along the axis. The cap's slide joint
+    reads 0 when the cap sits on the neck and the cap's height above it otherwise.
+    """
+
+    name: str
+    radius: float
+    body_half: float
+    neck_radius: float
+    neck_half: float
+    cap_radius: float = CAP_RADIUS
+    cap_half: float = CAP_HALF
+
+    @classmethod
+    def of(cls, name: str, scale: float = 1.0) -> WineBottleParts:
+        # The cap keeps its size so the gripper's grasp does not change with the instance.
+        return cls(name, WINE_RADIUS * scale, WINE_BODY_HALF * scale, WINE_NECK_RADIUS, WINE_NECK_HALF * scale)
+
+    @property
+    def body(self) -> str:
+        return f"{self.name}/body"
+
+    @property
+    def cap(self) -> str:
+        return f"{self.name}/cap"
+
+    @property
+    def joint(self) -> str:
+        return f"{self.name}/cap_slide"
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.body, self.cap)
+
+    @property
+    def shoulder_top(self) -> float:
+        return 2 * self.body_half + 0.02
+
+    @property
+    def neck_top(self) -> float:
+        return self.shoulder_top + 2 * self.neck_half
+
+    @property
+    def cap_bottom(self) -> float:
+        """Height of the cap's lower edge above the bottle's bottom when it is on (it overlaps the neck)."""
+        return self.neck_top - 0.01
+
+
+def add_wine_bottle(builder: SceneBuilder, name: str, position, yaw: float = 0.0, color: str = "green",
+                    scale: float = 1.0, role: str = "target", cap_color: str = "red") -> ObjectInfo:
+    """A free, heavy (1 kg) wine bottle with a cap on a slide joint along its axis.
+
+    The cap is held by 3 N of joint friction, so it comes off only when pulled; the bottle's weight
+    keeps it on the table while that happens. RLBench's wine bottle is unscrewed by a twist;
+    this one is uncorked by a straight pull.
+    """
+    p = WineBottleParts.of(name, scale)
+    colour = rgba(color)
+    body = builder.world.add_body(name=p.body, pos=[float(position[0]), float(position[1]), 0.0005],
+                                  quat=yaw_quat(yaw))
+    body.add_freejoint(name=f"{name}/free")
+    body.add_geom(name=f"{name}/glass", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[p.radius, p.body_half, 0],
+                  pos=[0, 0, p.body_half], rgba=colour, mass=WINE_MASS * 0.9, friction=[1.0, 0.02, 0.0005], condim=4)
+    body.add_geom(name=f"{name}/shoulder", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[0.6 * p.radius, 0.01, 0],
+                  pos=[0, 0, 2 * p.body_half + 0.01], rgba=colour, mass=WINE_MASS * 0.05)
+    body.add_geom(name=f"{name}/neck", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[p.neck_radius, p.neck_half, 0],
+                  pos=[0, 0, p.shoulder_top + p.neck_half], rgba=colour, mass=WINE_MASS * 0.05)
+    cap = body.add_body(name=p.cap, pos=[0, 0, p.cap_bottom + p.cap_half])
+    cap.add_joint(name=p.joint, type=mujoco.mjtJoint.mjJNT_SLIDE, axis=[0, 0, 1], range=[0.0, CAP_TRAVEL],
+                  frictionloss=CAP_FRICTION, damping=1.0, armature=0.01)
+    cap.add_geom(name=f"{name}/cap_geom", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[p.cap_radius, p.cap_half, 0],
+                 rgba=rgba(cap_color), mass=0.01, friction=[1.5, 0.02, 0.0005])
+    top = p.cap_bottom + 2 * p.cap_half
+    info = ObjectInfo(name, "bottle", color, size_word(scale), p.bodies, p.radius + 0.01, np.array(body.pos), role,
+                      np.array([p.radius, p.radius, top]))
+    return builder.register(info)

@@ -38,6 +38,7 @@ from lano3dp.sim.tasks import (  # noqa: E402,F401
     bowl_pour,
     close_microwave,
     open_drawer,
+    open_wine_bottle,
     phone_on_base,
     put_item_in_drawer,
 )

@@ -101,24 +101,47 @@ def test_noisy_guidance_differentiates_the_cost_of_the_noisy_sample_itself():
         torch.testing.assert_close(step.cost, OBSTACLE(step.sample))
 
 
-def test_clip_sample_does_not_zero_the_gradient_nor_undo_the_push_beyond_the_unit_box():
-    """The cost must see the unclipped A_0|k: clamping it to [-1, 1] would make its gradient zero
-    for a path that the normaliser maps outside [-1, 1]. And a guided step must not clip either, or
-    the next step pulls the pushed sample back inside [-1, 1] and only the last push survives."""
+def test_clip_sample_does_not_zero_the_gradient_and_a_wider_guided_clip_keeps_the_push():
+    """The cost must see the unclipped A_0|k: clamping it to [-1, 1] would make its gradient zero for a
+    path that the normaliser maps outside [-1, 1]. With the scheduler's clip on guided steps, each step
+    pulls the pushed sample back inside [-1, 1] and only the last push survives; widening the guided
+    steps' clip range keeps every push."""
     outside = straight_line([1.4, -0.8, 0.0], [1.4, 0.8, 0.0], HORIZON)
     obstacle = Cylinder((1.2, 0.0), 0.45, margin=0.05)
     steps = []
     unguided = sample("ddpm", prior_mean=outside, cost=obstacle)
-    guided = sample("ddpm", GuidanceConfig(GuidanceMode.CLEAN, 0.3, 10), prior_mean=outside, cost=obstacle,
-                    on_step=steps.append)
+    clipped = sample("ddpm", GuidanceConfig(GuidanceMode.CLEAN, 0.3, 10), prior_mean=outside, cost=obstacle,
+                     on_step=steps.append)
     guided_steps = [s for s in steps if s.guided]
     assert all(s.clean_estimate[..., 0].max() > 1.0 for s in guided_steps)
     assert all(s.gradient.abs().sum() > 0 for s in guided_steps)
     assert collision_rate(unguided, obstacle) == 1.0
-    assert collision_rate(guided, obstacle) == 0.0
-    clipped = sample("ddpm", GuidanceConfig(GuidanceMode.CLEAN, 0.3, 10, clip_guided_steps=True), prior_mean=outside,
-                     cost=obstacle)
-    assert collision_rate(clipped, obstacle) >= 0.3
+    assert 0.3 <= collision_rate(clipped, obstacle) < 1.0  # the gradient acts, but clipping undoes most of it
+    for clip_range in (3.0, float("inf")):
+        widened = sample("ddpm", GuidanceConfig(GuidanceMode.CLEAN, 0.3, 10, guided_clip_range=clip_range),
+                         prior_mean=outside, cost=obstacle)
+        assert collision_rate(widened, obstacle) == 0.0
+
+
+def test_alpha_bar_push_weight_scales_each_push_by_the_noise_level():
+    """DDIM-10, S = 100: the last step (t = 0, abar_prev = 1) keeps its push; earlier pushes shrink."""
+    for push_weight in ("constant", "alpha_bar"):
+        steps = []
+        sample("ddim", GuidanceConfig(GuidanceMode.CLEAN, 0.01, 100, push_weight=push_weight), on_step=steps.append)
+        first, last = steps[0], steps[-1]
+        scheduler = make_scheduler("ddim")
+        abar = scheduler.alphas_cumprod
+        expected_first = 1.0 if push_weight == "constant" else float((abar[90] * abar[80]).sqrt())
+        expected_last = 1.0 if push_weight == "constant" else float(abar[0].sqrt())
+        # the guided output minus what the scheduler alone would give is -rho * weight * gradient
+        for step, expected in ((first, expected_first), (last, expected_last)):
+            scheduler.set_timesteps(10)
+            prior = GaussianPathPrior(LINE, 0.05, scheduler.alphas_cumprod)
+            plain = scheduler.step(prior(step.sample, torch.full((BATCH,), step.timestep)), step.timestep,
+                                   step.sample).prev_sample
+            push = plain - step.next_sample
+            torch.testing.assert_close(push, 0.01 * expected * step.gradient, rtol=1e-4, atol=1e-7)
+    assert expected_first < 0.05
 
 
 def test_guidance_errors_name_the_problem():

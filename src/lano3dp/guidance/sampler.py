@@ -25,16 +25,27 @@ rho pushes DDIM-10 with S = 100 about as often as DDPM-100 with S = 10. With `pe
 rho is multiplied by the stride (training steps per inference step) instead, which keeps the total
 push across a window of S training steps the same as DDPM's; measured in bench/bench_guidance.py.
 
+Push weighting. A push delta on A_{k-1} reaches the final sample amplified by about
+1 / sqrt(abar_{k-1}) (the later steps rescale it like signal), and the gradient itself carries
+d A_0|k / d A_k ~ 1 / sqrt(abar_k). Late DDPM steps have abar ~ 1, so the paper's constant rho is
+fine for S = 10 of 100; but DDIM-10 guided on every step starts at abar_90 ~ 0.02, where the same
+rho moves the result ~50x more, and throws it far off the data. `push_weight="alpha_bar"` multiplies
+each push by sqrt(abar_k * abar_{k-1}), so every guided step moves the final sample by about
+rho * grad whatever its noise level (FreeDoM scales by sqrt(abar_k) for the same reason).
+
 clip_sample. Diffusion Policy's schedulers clip their x_0 estimate to [-1, 1], the normaliser's
-range of the demonstrations. A detour around an obstacle the demonstrations never saw often has to
-leave that range, and then every clipped step undoes the pushes before it, so only the very last
-push survives (measured on the analytic prior in tests/test_guidance_sampler.py). By default the
-guided steps therefore use an unclipped copy of the scheduler (`clip_guided_steps=False`); unguided
-steps, and every step of an unguided run, keep the scheduler's clipping.
+range of the demonstrations. The cost always sees the unclipped A_0|k, so clipping never zeroes the
+gradient. But a detour around an obstacle the demonstrations never saw often has to leave that range,
+and then each clipped step pulls the pushed sample back inside, so only the very last push survives
+(tests/test_guidance_sampler.py). `guided_clip_range` r lets guided steps clip to [-r, r] instead.
+Switching clipping off altogether (r = inf) is only safe for the last few steps: with S = 100 the
+early, noisy x_0 estimates run away (a trained policy's goal error went from 5 cm to 88 m), hence a
+finite widening such as r = 3 (a detour may leave the demonstrated range by one range on each side).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
@@ -45,6 +56,9 @@ from lano3dp.guidance.exceptions import GuidanceError
 
 NoiseFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 CostFn = Callable[[torch.Tensor], torch.Tensor]
+
+
+PUSH_WEIGHTS = ("constant", "alpha_bar")
 
 
 class GuidanceMode(StrEnum):
@@ -63,15 +77,18 @@ class GuidanceConfig:
         last_steps: S; guide only while the training-scale step k = t + 1 <= S (100 = every step).
         per_train_step: multiply rho by the scheduler stride (num_train_timesteps / num_inference_steps),
             so fewer, longer inference steps push as much in total as DDPM-100 (see the module docstring).
-        clip_guided_steps: keep the scheduler's clip_sample on guided steps (False: guided steps are unclipped,
-            so a push beyond the demonstrations' range is not undone; see the module docstring).
+        guided_clip_range: on guided steps clip the x_0 estimate to [-r, r] (normalised units) instead of the
+            scheduler's range; None keeps the scheduler's, inf disables clipping (see the module docstring).
+        push_weight: "constant" (the paper: every guided step pushes by rho * grad) or "alpha_bar" (each push
+            times sqrt(abar_k * abar_{k-1}), so every step moves the final sample about equally; for DDIM).
     """
 
     mode: GuidanceMode = GuidanceMode.CLEAN
     scale: float = 1.0
     last_steps: int = 10
     per_train_step: bool = False
-    clip_guided_steps: bool = False
+    guided_clip_range: float | None = None
+    push_weight: str = "constant"
 
     def __post_init__(self):
         object.__setattr__(self, "mode", GuidanceMode(self.mode))
@@ -79,6 +96,10 @@ class GuidanceConfig:
             raise ValueError(f"guidance scale rho must be >= 0, got {self.scale}")
         if self.last_steps < 0:
             raise ValueError(f"last_steps S must be >= 0, got {self.last_steps}")
+        if self.guided_clip_range is not None and not self.guided_clip_range > 0:
+            raise ValueError(f"guided_clip_range must be > 0 or None, got {self.guided_clip_range}")
+        if self.push_weight not in PUSH_WEIGHTS:
+            raise ValueError(f"push_weight must be one of {PUSH_WEIGHTS}, got {self.push_weight!r}")
 
     def active(self, timestep: int) -> bool:
         return self.mode is not GuidanceMode.NONE and timestep + 1 <= self.last_steps
@@ -151,8 +172,10 @@ def denoise(
     stride = scheduler.config.num_train_timesteps / num_inference_steps
     step_scale = guidance.scale * (stride if guidance.per_train_step else 1.0)
     guided_scheduler = scheduler
-    if guidance.enabled and not guidance.clip_guided_steps and getattr(scheduler.config, "clip_sample", False):
-        guided_scheduler = type(scheduler).from_config(scheduler.config, clip_sample=False)
+    if guidance.enabled and guidance.guided_clip_range is not None and getattr(scheduler.config, "clip_sample", False):
+        clip_range = guidance.guided_clip_range
+        guided_scheduler = type(scheduler).from_config(scheduler.config, clip_sample=not math.isinf(clip_range),
+                                                       clip_sample_range=1.0 if math.isinf(clip_range) else clip_range)
         guided_scheduler.set_timesteps(num_inference_steps)
     alphas_cumprod = scheduler.alphas_cumprod.to(dtype)
     sample = initial_noise.to(dtype).clone() if initial_noise is not None else torch.randn(
@@ -186,7 +209,12 @@ def denoise(
         step_scheduler = guided_scheduler if guided else scheduler
         next_sample = step_scheduler.step(noise, t, sample, generator=generator).prev_sample
         if guided:
-            next_sample = next_sample - step_scale * gradient  # Algorithm 1, line 7
+            weight = 1.0
+            if guidance.push_weight == "alpha_bar":
+                previous = t - int(round(stride))
+                alpha_bar_previous = alphas_cumprod[previous] if previous >= 0 else torch.ones((), dtype=dtype)
+                weight = (alpha_bar * alpha_bar_previous).sqrt()
+            next_sample = next_sample - step_scale * weight * gradient  # Algorithm 1, line 7
         if on_step is not None:
             on_step(DenoiseStep(t, sample, estimate, next_sample, guided, gradient, cost))
         sample = next_sample

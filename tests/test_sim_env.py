@@ -77,3 +77,23 @@ def test_random_actions_never_crash(env):
 
 def test_env_meets_the_simulator_protocol(env):
     assert isinstance(env, SimulatorProtocol)
+
+
+def test_gymnasium_env_checker_passes():
+    from gymnasium.utils.env_checker import check_env
+
+    environment = TabletopEnv("bottle_upright", image_size=32)
+    try:
+        check_env(environment, skip_render_check=False)
+    finally:
+        environment.close()
+
+
+def test_frame_carries_ground_truth_instances(env):
+    env.reset(seed=0)
+    frame = env.frame()
+    assert frame.instance_attributes["bowl"] == {"kind": "bowl", "color": "blue", "size": "medium", "role": "target"}
+    assert frame.instance_attributes["gripper"]["role"] == "robot"
+    bowl_pixels = np.isin(frame.segmentation, frame.instance_names["bowl"]).sum()
+    assert bowl_pixels > 20
+    assert frame.depth[frame.segmentation >= 0].min() > 0.3  # metres from the camera

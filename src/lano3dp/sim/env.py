@@ -107,7 +107,7 @@ class TabletopEnv(gym.Env):
 
         image = (self.height, self.width)
         obs = {
-            "depth": spaces.Box(0.0, np.inf, image, np.float32),
+            "depth": spaces.Box(0.0, 100.0, image, np.float32),  # metres; 0 = no surface
             "segmentation": spaces.Box(-1, np.iinfo(np.int32).max, image, np.int32),
             "state": spaces.Box(-np.inf, np.inf, (11,), np.float32),
             "intrinsics": spaces.Box(-np.inf, np.inf, (3, 3), np.float32),

@@ -113,6 +113,10 @@ class SceneBuilder:
         # Fast offscreen rendering on llvmpipe: shadow maps and multisampling cost 10-80x.
         visual.quality.shadowsize = 0
         visual.quality.offsamples = 0
+        # Coarser tessellation of cylinders/spheres: ~20% cheaper passes, invisible at 128x128.
+        visual.quality.numslices = 16
+        visual.quality.numstacks = 4
+        visual.quality.numquads = 1
         visual.global_.offwidth = self.max_image_size
         visual.global_.offheight = self.max_image_size
         visual.headlight.ambient = [0.35, 0.35, 0.35]

@@ -167,6 +167,9 @@ def sample_extras(task, layout, rng: np.random.Generator, variation: Variation) 
     path = task.nominal_path(layout)
     corridor = path[:, :2]
     used_colors = {p.color for p in layout.objects.values()}
+    # Obstacles first: they must sit on the path, and the other extras then keep clear of them.
+    if variation.has("obstacle"):
+        extras.objects.extend(sample_obstacles(task, layout, rng, variation.n_obstacles, footprints))
     if variation.has("similar"):
         for slot in task.similar_slots:
             target = layout.objects[slot]
@@ -195,29 +198,40 @@ def sample_extras(task, layout, rng: np.random.Generator, variation: Variation) 
             color = other_colors(used_colors)[rng.integers(len(other_colors(used_colors)))]
             extras.objects.append(ExtraObject(f"distractor_{kind}_{i}", kind, xy, float(rng.uniform(-np.pi, np.pi)),
                                               color, 1.0, "distractor"))
-    if variation.has("obstacle"):
-        extras.objects.extend(sample_obstacles(task, layout, rng, variation.n_obstacles, footprints))
     return extras
 
 
 def sample_obstacles(task, layout, rng: np.random.Generator, count: int,
                      footprints: list[tuple[np.ndarray, float]]) -> list[ExtraObject]:
-    """Cylinders centred within 2 cm of the expert's transport path, clear of every object footprint."""
-    region = task.obstacle_region(layout)
+    """Cylinders standing on the expert's path, clear of every object footprint by 1.5 cm.
+
+    First within 2 cm of the task's `obstacle_region` (its transport segment); where that has no
+    free spot (e.g. a task whose path only rises and falls over its objects), within 5 cm of any
+    segment of the nominal path. Fewer than `count` obstacles are returned when neither has room.
+    """
+    attempts = [(task.obstacle_region(layout), 0.02, 200), (task.nominal_path(layout), 0.05, 300)]
     obstacles = []
     for i in range(count):
-        for _ in range(200):
-            radius = float(rng.uniform(0.025, 0.04))
-            segment = rng.integers(len(region) - 1) if len(region) > 1 else 0
-            a, b = region[segment, :2], region[min(segment + 1, len(region) - 1), :2]
-            xy = a + rng.uniform(0.2, 0.8) * (b - a)
-            direction = b - a
-            normal = np.array([-direction[1], direction[0]]) / max(np.linalg.norm(direction), 1e-9)
-            xy = xy + normal * rng.uniform(-0.02, 0.02)
-            if any(np.linalg.norm(xy - c) < r + radius + 0.015 for c, r in footprints):
-                continue
-            footprints.append((xy, radius))
-            obstacles.append(ExtraObject(f"obstacle_{i}", "cylinder", xy, 0.0, "grey", 1.0, "obstacle",
-                                         radius=radius, height=float(rng.uniform(0.3, 0.4))))
-            break
+        placed = False
+        for region, offset, tries in attempts:
+            for _ in range(tries):
+                radius = float(rng.uniform(0.025, 0.04))
+                segment = int(rng.integers(len(region) - 1)) if len(region) > 1 else 0
+                a, b = region[segment, :2], region[min(segment + 1, len(region) - 1), :2]
+                direction = b - a
+                if np.linalg.norm(direction) < 1e-3:
+                    continue
+                normal = np.array([-direction[1], direction[0]]) / np.linalg.norm(direction)
+                xy = a + rng.uniform(0.1, 0.9) * direction + normal * rng.uniform(-offset, offset)
+                if np.any(xy < PLACEMENT_LOW) or np.any(xy > PLACEMENT_HIGH):
+                    continue
+                if any(np.linalg.norm(xy - c) < r + radius + 0.015 for c, r in footprints):
+                    continue
+                footprints.append((xy, radius))
+                obstacles.append(ExtraObject(f"obstacle_{i}", "cylinder", xy, 0.0, "grey", 1.0, "obstacle",
+                                             radius=radius, height=float(rng.uniform(0.3, 0.4))))
+                placed = True
+                break
+            if placed:
+                break
     return obstacles

@@ -72,9 +72,12 @@ class Layout:
     objects: dict[str, Placement]
     names: dict[str, str] = field(default_factory=dict)
     params: dict[str, Any] = field(default_factory=dict)
+    keepout: list[tuple[np.ndarray, float]] = field(default_factory=list)  # extra (xy, radius) discs, e.g. a handle
 
     def footprints(self) -> list[tuple[np.ndarray, float]]:
-        return [(np.asarray(p.position[:2], float), p.radius) for p in self.objects.values()]
+        """Table discs (xy (2,), radius m) other objects must not overlap: placements plus `keepout`."""
+        discs = [(np.asarray(p.position[:2], float), p.radius) for p in self.objects.values() if p.radius > 0]
+        return discs + [(np.asarray(xy, float)[:2], r) for xy, r in self.keepout]
 
     def set_names(self, slots, variation: Variation) -> None:
         """Slot object names: the slot word, or "<color>_<kind>" when look-alikes share the scene."""

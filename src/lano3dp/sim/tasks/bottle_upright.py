@@ -41,7 +41,7 @@ def lying_quat(yaw: float) -> np.ndarray:
 @register_task
 class BottleUpright(Task):
     name = "bottle_upright"
-    skill = "upright"
+    skill = "bottle_upright"  # the language skill registry names skills after their task
     object_slots = ("bottle",)
     instruction = "stand the {bottle} upright"
     max_steps = 150
@@ -52,9 +52,12 @@ class BottleUpright(Task):
         color = str(rng.choice(["red", "blue", "orange", "purple"])) if variation.has("instance") else "green"
         xy = rng.uniform([0.38, -0.12], [0.56, 0.12])
         yaw = float(rng.uniform(-0.3, 0.3))
-        length = (BOTTLE_BODY_HALF + 0.08) * scale
-        placement = Placement("bottle", np.array([*xy, BOTTLE_RADIUS * scale]), yaw, color, scale, length + 0.02)
-        layout = Layout(seed=0, objects={"bottle": placement})
+        # The lying bottle's footprint: a disc at its centre plus one over each end (a disc around the
+        # whole 19 cm bottle would wall off most of the table).
+        placement = Placement("bottle", np.array([*xy, BOTTLE_RADIUS * scale]), yaw, color, scale, 0.06 * scale)
+        axis = rot_z(yaw) @ np.array([0.0, 1.0, 0.0])
+        keepout = [(xy + axis[:2] * 0.085 * scale, 0.05 * scale), (xy - axis[:2] * 0.06 * scale, 0.05 * scale)]
+        layout = Layout(seed=0, objects={"bottle": placement}, keepout=keepout)
         layout.set_names(self.object_slots, variation)
         return layout
 

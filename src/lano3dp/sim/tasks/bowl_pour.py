@@ -37,7 +37,7 @@ ITEM_COLORS = ("yellow", "orange", "red", "green", "purple")
 @register_task
 class BowlPour(Task):
     name = "bowl_pour"
-    skill = "pour"
+    skill = "bowl_pour"  # the language skill registry names skills after their task
     object_slots = ("bowl", "pan")
     instruction = "pour the contents of the {bowl} into the {pan}"
     max_steps = 220
@@ -60,8 +60,10 @@ class BowlPour(Task):
             "bowl": Placement("bowl", np.array([*bowl_xy, 0.0]), bowl_yaw, bowl_color, bowl_scale,
                               primitives.FOOTPRINTS["bowl"] * bowl_scale),
             "pan": Placement("pan", np.array([*pan_xy, 0.0]), pan_yaw, pan_color, pan_scale,
-                             primitives.FOOTPRINTS["pan"] * pan_scale + 0.06),  # + handle
+                             primitives.FOOTPRINTS["pan"] * pan_scale),
         }
+        handle_direction = -np.array([np.cos(pan_yaw), np.sin(pan_yaw)])  # the handle is along local -x
+        keepout = [(pan_xy + handle_direction * (PAN_RADIUS + 0.06) * pan_scale, 0.07 * pan_scale)]
         # Items in the bowl half that faces the pan, clear of the inner finger.
         towards_pan = (pan_xy - bowl_xy) / np.linalg.norm(pan_xy - bowl_xy)
         centre = bowl_xy + towards_pan * 0.012 * bowl_scale
@@ -72,7 +74,7 @@ class BowlPour(Task):
             shape = str(rng.choice(["sphere", "cube"]))
             objects[f"item{i}"] = Placement("item", np.array([*xy, 0.008 + 0.012]), 0.0,
                                             str(rng.choice(ITEM_COLORS)), 1.0, 0.0, {"shape": shape})
-        layout = Layout(seed=0, objects=objects)
+        layout = Layout(seed=0, objects=objects, keepout=keepout)
         layout.set_names(self.object_slots, variation)
         return layout
 
@@ -126,9 +128,9 @@ class BowlPour(Task):
         return plan
 
     def obstacle_region(self, layout: Layout) -> np.ndarray:
-        """The transport segment: from above the grasp to above the pour point."""
-        path = self.nominal_path(layout)
-        return path[3:5]
+        """The transport segment: from above the grasp (after the lift) to above the pour point."""
+        path = self.nominal_path(layout)  # home, above grasp, grasp, (close), lift, carry, ...
+        return path[4:6]
 
     # ---- success ---------------------------------------------------------------------------
     def is_success(self, sim: SimState, layout: Layout) -> bool:

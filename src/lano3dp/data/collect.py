@@ -1,0 +1,209 @@
+"""Scripted-expert demonstrations -> zarr episode store (`lano3dp collect`).
+
+Each episode runs the task's scripted expert in `TabletopEnv` and records, per control step,
+the observation before the action and the action:
+
+    action          (10,) float32   absolute EE pose + gripper the expert commanded
+    state           (11,) float32   EE pose, gripper opening, grasp flag
+    object_clouds   (K, N, 3)       per-slot clouds (slot order = task.object_slots), ground-truth
+                                    segmentation through `perception.ObjectObserver` + `SimOracleSegmenter`
+    scene_cloud     (512, 3)        cropped scene without the table (DP3 baseline)
+    rgb             (96, 96, 3)     uint8 (Diffusion Policy baseline)
+
+Only successful expert episodes are kept; an episode ends at the step the task first
+succeeds. Episode i (0-based, in the store) uses the first successful seed among
+`seed + i`, `seed + i + SEED_STRIDE`, `seed + i + 2 * SEED_STRIDE`, ... so the dataset is
+the same whether it was collected in one run or resumed: re-running with the same output
+appends only the missing episodes (the store's episode count says how many exist).
+
+Occlusion: when an object has fewer than `min_points` visible points in a frame (e.g. the pan
+under the tilted bowl), its cloud from the previous step is reused, as a video tracker would
+hold it; a slot missing in the first frame discards the episode. The count of such frames is
+kept in the store attribute `held_clouds`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lano3dp.data.store import EpisodeStore
+from lano3dp.errors import Lano3dpError
+
+SEED_STRIDE = 100_003  # fallback seeds of episode i: seed + i + k * SEED_STRIDE (k = 0, 1, ...)
+MAX_TRIES = 5          # seeds tried per episode before giving up
+# Workspace crop for clouds (world frame, metres): the table area up to 0.6 m high.
+CROP_LOW = (0.0, -0.6, -0.02)
+CROP_HIGH = (0.95, 0.6, 0.6)
+CONTROL_HZ = 10.0
+
+
+class CollectionError(Lano3dpError, RuntimeError):
+    """The expert could not produce an episode (every seed tried failed)."""
+
+
+@dataclass
+class CollectConfig:
+    """What `collect` records. Sizes in pixels/points; crop box in metres, world frame."""
+
+    task: str
+    episodes: int
+    out: Path
+    variation: str = "clean"
+    seed: int = 0
+    image_size: int = 128
+    n_points: int = 256
+    scene_points: int = 512
+    rgb_size: int = 96
+    crop_low: tuple[float, float, float] = CROP_LOW
+    crop_high: tuple[float, float, float] = CROP_HIGH
+    min_points: int = 10
+    progress: bool = True
+
+
+@dataclass
+class CollectResult:
+    path: Path
+    added: int
+    total: int
+    failed_seeds: list[int] = field(default_factory=list)
+    seconds: float = 0.0
+    steps: int = 0
+
+
+def collect(task: str, episodes: int, out: str | Path, variation: str = "clean", seed: int = 0,
+            image_size: int = 128, n_points: int = 256, progress: bool = True, **options) -> CollectResult:
+    """Record scripted-expert episodes of `task` into `out` until it holds `episodes` episodes."""
+    config = CollectConfig(task=task, episodes=episodes, out=Path(out), variation=variation, seed=seed,
+                           image_size=image_size, n_points=n_points, progress=progress, **options)
+    return collect_episodes(config)
+
+
+def collect_episodes(config: CollectConfig) -> CollectResult:
+    from tqdm.auto import tqdm
+
+    from lano3dp.perception import ObjectObserver, SimOracleSegmenter
+    from lano3dp.sim import TabletopEnv, Variation
+
+    started = time.perf_counter()
+    variation = Variation.parse(config.variation)
+    env = TabletopEnv(config.task, variation=variation, image_size=config.image_size, render_rgb=True,
+                      control_hz=CONTROL_HZ)
+    task = env.task
+    attrs = {
+        "skill": task.skill,
+        "task": task.name,
+        "object_names": list(task.object_slots),
+        "control_hz": CONTROL_HZ,
+        "crop_low": list(config.crop_low),
+        "crop_high": list(config.crop_high),
+        "n_points": config.n_points,
+        "scene_points": config.scene_points,
+        "variation": variation.name,
+        "image_size": config.image_size,
+        "base_seed": config.seed,
+        "seed_stride": SEED_STRIDE,
+        "source": "scripted expert, successful episodes only",
+    }
+    store = EpisodeStore.open_or_create(config.out, attrs)
+    existing = store.attrs
+    for key in ("task", "variation", "n_points", "base_seed"):
+        if key in existing and existing[key] != attrs[key]:
+            raise CollectionError(f"{config.out} was collected with {key}={existing[key]!r}, not {attrs[key]!r}; "
+                                  "use another --out or the same settings to resume")
+    observer = ObjectObserver(SimOracleSegmenter(), n_points=config.n_points, crop_low=config.crop_low,
+                              crop_high=config.crop_high, min_points=config.min_points, seed=0)
+    result = CollectResult(config.out, 0, store.n_episodes)
+    seeds = list(existing.get("episode_seeds", []))
+    held_total = int(existing.get("held_clouds", 0))
+    bar = tqdm(total=config.episodes, initial=store.n_episodes, desc=f"collect {task.name}",
+               disable=not config.progress, unit="ep")
+    try:
+        for index in range(store.n_episodes, config.episodes):
+            for attempt in range(MAX_TRIES):
+                episode_seed = config.seed + index + attempt * SEED_STRIDE
+                episode, held = record_episode(env, observer, episode_seed, config)
+                if episode is not None:
+                    break
+                result.failed_seeds.append(episode_seed)
+            else:
+                raise CollectionError(f"the {task.name} expert failed on {MAX_TRIES} seeds for episode {index} "
+                                      f"(seeds {result.failed_seeds[-MAX_TRIES:]})")
+            store.append_episode(episode)
+            seeds.append(episode_seed)
+            held_total += held
+            result.added += 1
+            result.steps += len(episode["action"])
+            store.update_attrs(episode_seeds=seeds, held_clouds=held_total,
+                               failed_seeds=list(existing.get("failed_seeds", [])) + result.failed_seeds,
+                               camera=env.camera.to_dict())
+            bar.update(1)
+    finally:
+        bar.close()
+        env.close()
+    result.total = store.n_episodes
+    result.seconds = time.perf_counter() - started
+    return result
+
+
+def record_episode(env, observer, seed: int, config: CollectConfig) -> tuple[dict[str, np.ndarray] | None, int]:
+    """Run the expert on `seed`; the episode's arrays if it succeeded, else None. Also the held-cloud count."""
+    from lano3dp.perception import PerceptionError, scene_cloud
+
+    obs, info = env.reset(seed=seed)
+    phrases = [info["target_phrases"][slot] for slot in env.task.object_slots]
+    actions = env.expert_plan().actions()
+    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("action", "state", "object_clouds", "scene_cloud", "rgb")}
+    last_clouds: list[np.ndarray | None] = [None] * len(phrases)
+    held = 0
+    success = False
+    for t in range(env.max_steps):
+        frame = env.frame()
+        clouds = []
+        for k, phrase in enumerate(phrases):
+            try:
+                cloud = observer.observe(frame, [phrase]).points[0]
+            except PerceptionError:
+                if last_clouds[k] is None:
+                    return None, 0
+                cloud = last_clouds[k]
+                held += 1
+            last_clouds[k] = cloud
+            clouds.append(cloud)
+        action = actions[min(t, len(actions) - 1)]
+        rows["action"].append(action)
+        rows["state"].append(obs["state"])
+        rows["object_clouds"].append(np.stack(clouds))
+        rows["scene_cloud"].append(scene_cloud(frame, config.scene_points, config.crop_low, config.crop_high,
+                                               table_height=0.0))
+        rows["rgb"].append(resize_rgb(obs["rgb"], config.rgb_size))
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated:
+            success = True
+            break
+        if truncated:
+            break
+    if not success:
+        return None, 0
+    episode = {key: np.stack(values) for key, values in rows.items()}
+    for key in ("action", "state", "object_clouds", "scene_cloud"):
+        episode[key] = episode[key].astype(np.float32)
+    return episode, held
+
+
+def resize_rgb(rgb: np.ndarray, size: int) -> np.ndarray:
+    """(H, W, 3) uint8 -> (size, size, 3) uint8, area-averaged (PIL's box filter)."""
+    if rgb.shape[0] == size and rgb.shape[1] == size:
+        return rgb
+    from PIL import Image
+
+    return np.asarray(Image.fromarray(rgb).resize((size, size), Image.Resampling.BOX))
+
+
+def config_dict(config: CollectConfig) -> dict:
+    data = asdict(config)
+    data["out"] = str(config.out)
+    return data

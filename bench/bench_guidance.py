@@ -99,10 +99,9 @@ class SweepConfig:
     samples: int = 100
     test_seed: int = 1
     sample_seed: int = 2
-    paper_rhos: tuple[float, ...] = (0.25, 0.5, 1.0, 2.0, 4.0, 16.0)
-    metric_rhos: tuple[float, ...] = (0.0025, 0.005, 0.01, 0.02, 0.04)
-    ddpm_last_steps: tuple[int, ...] = (10, 100)
-    ddim_last_steps: tuple[int, ...] = (10, 100)
+    paper_rhos: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0, 16.0)
+    metric_rhos: tuple[float, ...] = (0.005, 0.01, 0.02, 0.04)
+    metric_clip_range: float = 3.0
     latency_repeats: int = 7
     checked_start_rho: float = 0.005
     checked_max_tries: int = 4
@@ -204,16 +203,26 @@ class Setting:
     rho: float = 0.0
     last_steps: int = 0
     cost: str = "paper"  # paper (the hinge as is) | metric (MetricGradient) | metric+dense (also segments)
+    push_weight: str = "constant"  # constant (paper) | alpha_bar
+    clip_range: float | None = None  # guided steps' x_0 clip range (None: the scheduler's [-1, 1])
 
     @property
     def guidance(self) -> GuidanceConfig | None:
         if self.mode == "none":
             return None
-        return GuidanceConfig(GuidanceMode(self.mode), self.rho, self.last_steps)
+        return GuidanceConfig(GuidanceMode(self.mode), self.rho, self.last_steps, push_weight=self.push_weight,
+                              guided_clip_range=self.clip_range)
 
     @property
     def steps(self) -> int:
         return 100 if self.scheduler == "ddpm" else 10
+
+    @property
+    def series(self) -> str:
+        """The curve this setting belongs to (everything but rho)."""
+        extras = [self.cost] + ([self.push_weight] if self.push_weight != "constant" else []) + (
+            [f"clip {self.clip_range:g}"] if self.clip_range is not None else [])
+        return f"{self.mode} S={self.last_steps} ({', '.join(extras)})"
 
 
 def make_cost(kind: str, obstacle: Cylinder, policy: DiffusionPolicy):
@@ -255,15 +264,23 @@ def metrics(chunk, goals: np.ndarray, obstacle: Cylinder, n_action_steps: int) -
 
 
 def sweep_settings(sweep: SweepConfig) -> list[Setting]:
-    settings = []
-    for scheduler, windows in (("ddpm", sweep.ddpm_last_steps), ("ddim", sweep.ddim_last_steps)):
-        settings.append(Setting(scheduler, "none"))
-        for last_steps in windows:
-            for mode in ("noisy", "clean"):
-                settings += [Setting(scheduler, mode, rho, last_steps) for rho in sweep.paper_rhos]
-            for kind in ("metric", "metric+dense"):
-                settings += [Setting(scheduler, "clean", rho, last_steps, kind) for rho in sweep.metric_rhos]
-    return settings
+    """The paper's variants with its rho (cost on raw normalised gradients), then ours (rho in m per step)."""
+    paper, metric = sweep.paper_rhos, sweep.metric_rhos
+    clip = sweep.metric_clip_range
+    return [
+        Setting("ddpm", "none"),
+        *[Setting("ddpm", "noisy", rho, 10) for rho in paper],
+        *[Setting("ddpm", "clean", rho, 10) for rho in paper],  # the paper: A_0|k, last 10 of 100 steps
+        *[Setting("ddpm", "clean", rho, 100) for rho in paper],
+        *[Setting("ddpm", "clean", rho, 10, "metric", clip_range=clip) for rho in metric],
+        *[Setting("ddpm", "clean", rho, 10, "metric+dense", clip_range=clip) for rho in metric],
+        Setting("ddim", "none"),
+        *[Setting("ddim", "noisy", rho, 100) for rho in paper],
+        *[Setting("ddim", "clean", rho, 10) for rho in paper],  # S=10 guides only DDIM's last step
+        *[Setting("ddim", "clean", rho, 100) for rho in paper],
+        *[Setting("ddim", "clean", rho, 100, push_weight="alpha_bar") for rho in paper],
+        *[Setting("ddim", "clean", rho, 100, "metric+dense", "alpha_bar", clip) for rho in metric],
+    ]
 
 
 def latency(policy, obs, goals, obstacle, repeats: int) -> dict:
@@ -307,15 +324,17 @@ def checked_execution(policy, obs, goals, obstacle, sweep: SweepConfig) -> dict:
                                                 num_inference_steps=10, generator=generator)
             return chunk.actions[..., :3], chunk  # the executed part: n_action_steps actions
 
-        result = checked_sample(sample_fn, obstacle, GuidanceConfig(GuidanceMode.CLEAN, sweep.checked_start_rho, 100),
-                                config)
+        first = GuidanceConfig(GuidanceMode.CLEAN, sweep.checked_start_rho, 100, push_weight="alpha_bar",
+                               guided_clip_range=sweep.metric_clip_range)
+        result = checked_sample(sample_fn, obstacle, first, config)
         tries.append(result.tries)
         successes.append(result.success)
         final_rhos.append(result.final_scale)
         final = result.payload.trajectory[0, -1, :3]
         goal_errors.append(float((final - torch.as_tensor(goals[index])).norm()))
     return {
-        "setting": "ddim10, clean, S=100, MetricGradient on the densified path, check executed actions densified x8",
+        "setting": "ddim10, clean, S=100, alpha_bar push, guided clip 3, MetricGradient on the densified path; "
+                   "the executed actions are checked densified x8",
         "start_rho": sweep.checked_start_rho, "growth": 2.0, "max_tries": sweep.checked_max_tries,
         "success_rate": float(np.mean(successes)),
         "failures_reported": int(len(successes) - np.sum(successes)),
@@ -340,13 +359,10 @@ def plot_results(rows: list[dict], path: Path) -> None:
         for row_index, (metric, label) in enumerate((("collision_rate", "collision rate (waypoints)"),
                                                       ("goal_error_delta", "goal error - unguided (m)"))):
             ax = axes[row_index, column]
-            series = sorted({(r["mode"], r["last_steps"], r["cost"]) for r in subset if r["mode"] != "none"})
-            for mode, last_steps, cost in series:
-                points = sorted((r["rho"], r[metric]) for r in subset
-                                if (r["mode"], r["last_steps"], r["cost"]) == (mode, last_steps, cost))
-                style = {"clean": "-o", "noisy": "--s"}[mode]
-                tag = "paper rho" if cost == "paper" else f"{cost}, rho in m/step"
-                ax.plot(*zip(*points, strict=True), style, ms=4, label=f"{mode} S={last_steps} ({tag})")
+            for series in dict.fromkeys(r["series"] for r in subset if r["mode"] != "none"):
+                points = sorted((r["rho"], r[metric]) for r in subset if r["series"] == series)
+                style = "--s" if series.startswith("noisy") else ("-o" if "paper" in series else "-^")
+                ax.plot(*zip(*points, strict=True), style, ms=4, label=series)
             if metric == "collision_rate":
                 ax.axhline(base[metric], color="k", lw=1, label="no guidance")
                 ax.axhline(0.05, color="tab:red", lw=0.8, ls=":", label="5%")
@@ -354,7 +370,7 @@ def plot_results(rows: list[dict], path: Path) -> None:
                 ax.axhline(0.02, color="tab:red", lw=0.8, ls=":", label="+2 cm")
                 ax.axhline(0.0, color="k", lw=1)
             ax.set_xscale("log")
-            ax.set_xlabel("rho")
+            ax.set_xlabel("rho (paper units: normalised; metric: m per guided step)")
             ax.set_ylabel(label)
             ax.set_title(f"{scheduler.upper()}-{100 if scheduler == 'ddpm' else 10}", fontsize=10)
     axes[0, 1].legend(fontsize=6, loc="upper right")
@@ -383,8 +399,8 @@ def main(argv: list[str] | None = None) -> int:
     training = BenchTrainConfig(steps=args.train_steps or (300 if args.quick else BenchTrainConfig.steps))
     sweep = SweepConfig()
     if args.quick:
-        sweep = SweepConfig(samples=16, paper_rhos=(4.0, 64.0), metric_rhos=(0.01, 0.04), ddpm_last_steps=(10,),
-                            ddim_last_steps=(100,), latency_repeats=2, checked_max_tries=3)
+        sweep = SweepConfig(samples=16, paper_rhos=(1.0, 4.0), metric_rhos=(0.01, 0.04), latency_repeats=2,
+                            checked_max_tries=3)
     if args.samples:
         sweep.samples = args.samples
     obstacle = Cylinder(obstacle_config.center, obstacle_config.radius, held_radius=obstacle_config.held_radius,
@@ -396,11 +412,11 @@ def main(argv: list[str] | None = None) -> int:
     for setting in sweep_settings(sweep):
         cost = make_cost(setting.cost, obstacle, policy)
         chunk, seconds = sample(policy, obs, setting, cost, sweep.sample_seed)
-        row = asdict(setting) | metrics(chunk, goals, obstacle, policy.config.n_action_steps)
+        row = asdict(setting) | {"series": setting.series} | metrics(chunk, goals, obstacle,
+                                                                       policy.config.n_action_steps)
         row["seconds_per_batch"] = round(seconds, 3)
         rows.append(row)
-        print(f"{setting.scheduler} {setting.mode:5s} S={setting.last_steps:3d} {setting.cost:12s} "
-              f"rho={setting.rho:<8g} collide {row['collision_rate']:.2f} "
+        print(f"{setting.scheduler} {setting.series:42s} rho={setting.rho:<8g} collide {row['collision_rate']:.2f} "
               f"(segments {row['segment_collision_rate']:.2f}) clear {row['min_clearance_mean']:+.3f} "
               f"goal {row['goal_error_mean']:.3f} {seconds:.1f}s", flush=True)
     for scheduler in ("ddpm", "ddim"):

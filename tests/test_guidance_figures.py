@@ -1,6 +1,7 @@
 """Diagnostics: the recorder keeps metric A_k / A_0|k, and the CLI writes Fig. 5 and Fig. 6."""
 
 import numpy as np
+import pytest
 import torch
 from diffusers import DDIMScheduler
 from typer.testing import CliRunner
@@ -43,10 +44,12 @@ def test_rho_figure_counts_colliding_trajectories(tmp_path):
     assert path.stat().st_size > 10_000
 
 
-def test_cli_writes_both_figures_with_the_analytic_prior(tmp_path):
+@pytest.mark.parametrize("variant", [[], ["--cost", "metric+dense", "--push-weight", "alpha_bar", "--clip-range", "3"]],
+                         ids=["paper", "metric"])
+def test_cli_writes_both_figures_with_the_analytic_prior(tmp_path, variant):
     result = CliRunner().invoke(app, ["guidance-figures", "--analytic", "--obstacle", "0", "0", "0.1", "--out",
                                       str(tmp_path), "--scheduler", "ddim", "--ks", "100,11,1", "--rhos", "0,0.3",
-                                      "--rho", "0.3", "--last-steps", "100", "--samples", "4"])
+                                      "--rho", "0.3", "--last-steps", "100", "--samples", "4", *variant])
     assert result.exit_code == 0, result.output
     for name in ("fig5_denoising.png", "fig6_rho.png"):
         assert (tmp_path / name).stat().st_size > 10_000

@@ -38,6 +38,10 @@ def guidance_figures(
     rho: float = typer.Option(1.0, help="Guidance scale for Fig. 5."),
     rhos: str = typer.Option("0,0.25,1,4", help="Comma-separated guidance scales for Fig. 6."),
     last_steps: int = typer.Option(10, help="S: guide while k <= S (training-scale steps)."),
+    cost_kind: str = typer.Option("paper", "--cost", help="paper (the xy hinge as is), metric (MetricGradient: "
+                                  "isotropic push, rho in m per step) or metric+dense (also pushes segments)."),
+    push_weight: str = typer.Option("constant", help="constant (paper) or alpha_bar (for DDIM on every step)."),
+    clip_range: float | None = typer.Option(None, help="Guided steps clip x_0 to [-r, r] (default: the scheduler's)."),
     scheduler: str = typer.Option("ddpm", help="ddpm or ddim."),
     steps: int | None = typer.Option(None, help="Inference steps (default: DDPM 100, DDIM the policy's)."),
     ks: str = typer.Option("100,50,20,10,5,1", help="Denoising steps k shown in Fig. 5."),
@@ -48,34 +52,43 @@ def guidance_figures(
     trajectories for several rho), top view, with the obstacle's body, contact line and Q*."""
     import torch
 
-    from lano3dp.guidance import Cylinder, GuidanceConfig, GuidanceMode
+    from lano3dp.guidance import Cylinder, Densified, GuidanceConfig, GuidanceMode, MetricGradient
     from lano3dp.guidance.diagnostics import DenoiseRecorder, plot_denoising, plot_trajectories_by_scale
 
-    cost = Cylinder(obstacle[:2], obstacle[2], held_radius=held_radius, margin=margin)
+    obstacle_cost = Cylinder(obstacle[:2], obstacle[2], held_radius=held_radius, margin=margin)
+    if cost_kind not in ("paper", "metric", "metric+dense"):
+        raise typer.BadParameter(f"--cost must be paper, metric or metric+dense, got {cost_kind!r}")
     wanted_k = [int(k) for k in ks.split(",") if k.strip()]
     scales = [float(r) for r in rhos.split(",") if r.strip()]
     mode = GuidanceMode(mode)
 
     if analytic:
-        sample_chunk, to_metric, label = _analytic_sampler(cost, scheduler, steps, samples)
+        sample_chunk, to_metric, label, action_range = _analytic_sampler(obstacle_cost, scheduler, steps, samples)
     else:
         if checkpoint is None or data is None:
             raise typer.BadParameter("give --checkpoint and --data, or --analytic")
-        sample_chunk, to_metric, label = _policy_sampler(checkpoint, data, episode, step, scheduler, steps, samples)
+        sample_chunk, to_metric, label, action_range = _policy_sampler(checkpoint, data, episode, step, scheduler,
+                                                                       steps, samples)
+    cost = obstacle_cost
+    if cost_kind != "paper":
+        cost = MetricGradient.from_stats(Densified(obstacle_cost, 4) if cost_kind == "metric+dense" else obstacle_cost,
+                                         *action_range)
+
+    def config(guide_mode, scale):
+        return GuidanceConfig(guide_mode, scale, last_steps, push_weight=push_weight, guided_clip_range=clip_range)
 
     recorder = DenoiseRecorder(to_metric, timesteps=[k - 1 for k in wanted_k])
-    sample_chunk(GuidanceConfig(mode, rho, last_steps), cost, torch.Generator().manual_seed(seed), recorder)
+    sample_chunk(config(mode, rho), cost, torch.Generator().manual_seed(seed), recorder)
     recorder.steps.sort(key=lambda s: -s.timestep)
     if not recorder.steps:
         raise typer.BadParameter(f"none of the steps k={wanted_k} is visited by this scheduler")
-    fig5 = plot_denoising(recorder.steps, cost, out / "fig5_denoising.png",
-                          title=f"{label}: guidance on {mode.value}, rho={rho:g}, S={last_steps}")
+    title = f"{label}: guidance on {mode.value} ({cost_kind} cost, {push_weight} push), S={last_steps}"
+    fig5 = plot_denoising(recorder.steps, obstacle_cost, out / "fig5_denoising.png", title=f"{title}, rho={rho:g}")
     finals = {}
     for scale in scales:
-        guidance = GuidanceConfig(mode if scale > 0 else GuidanceMode.NONE, scale, last_steps)
+        guidance = config(mode if scale > 0 else GuidanceMode.NONE, scale)
         finals[scale] = sample_chunk(guidance, cost, torch.Generator().manual_seed(seed), None)
-    fig6 = plot_trajectories_by_scale(finals, cost, out / "fig6_rho.png",
-                                      title=f"{label}: guidance on {mode.value}, S={last_steps}")
+    fig6 = plot_trajectories_by_scale(finals, obstacle_cost, out / "fig6_rho.png", title=title)
     typer.echo(f"wrote {fig5}\nwrote {fig6}")
 
 
@@ -95,7 +108,8 @@ def _policy_sampler(checkpoint, data, episode, step, scheduler, steps, samples):
                                             num_inference_steps=steps, generator=generator, on_step=on_step)
         return chunk.trajectory[..., :3].numpy()
 
-    return sample_chunk, to_metric, f"{Path(checkpoint).name} ({scheduler})"
+    stats = policy.normalizer_stats()["action"]
+    return sample_chunk, to_metric, f"{Path(checkpoint).name} ({scheduler})", (stats["min"], stats["max"])
 
 
 def _analytic_sampler(cost, scheduler_kind, steps, samples):
@@ -114,4 +128,4 @@ def _analytic_sampler(cost, scheduler_kind, steps, samples):
         return denoise(prior, scheduler, (samples, config.horizon, 3), num_inference_steps=steps, generator=generator,
                        guidance=guidance, cost_fn=cost, on_step=on_step).numpy()
 
-    return sample_chunk, None, f"analytic prior ({scheduler_kind})"
+    return sample_chunk, None, f"analytic prior ({scheduler_kind})", ([-1.0] * 3, [1.0] * 3)  # identity normaliser

@@ -217,18 +217,24 @@ def write_video(path: str | Path, frames: Sequence[np.ndarray], fps: int = 10) -
 
 
 _WORKER: EpisodeRunner | None = None
+_WORKER_ERROR: BaseException | None = None
 
 
 def _worker_init(config_dict: dict[str, Any]) -> None:
-    global _WORKER
+    global _WORKER, _WORKER_ERROR
     os.environ["OMP_NUM_THREADS"] = "1"
     import torch
 
     torch.set_num_threads(1)
-    _WORKER = EpisodeRunner(EvalConfig(**config_dict))
+    try:
+        _WORKER = EpisodeRunner(EvalConfig(**config_dict))
+    except Exception as error:  # a Pool re-spawns workers whose initializer raises, forever: report it per job
+        _WORKER_ERROR = error
 
 
 def _worker_run(job: tuple[int, int, str | None]) -> tuple[int, dict[str, Any]]:
+    if _WORKER_ERROR is not None:
+        raise _WORKER_ERROR
     index, seed, video = job
     return index, _WORKER.run(seed, video)
 

@@ -123,3 +123,14 @@ def percent(value: float | None) -> str:
 
 def centimetres(value: float | None) -> str:
     return "–" if value is None else f"{100 * value:.1f} cm"
+
+
+def wilson_interval(successes: int, trials: int, z: float = 1.96) -> tuple[float | None, float | None]:
+    """95% Wilson score interval of a success rate (sound at small n and at 0 or n successes)."""
+    if trials <= 0:
+        return None, None
+    p = successes / trials
+    denominator = 1 + z * z / trials
+    centre = (p + z * z / (2 * trials)) / denominator
+    half = z * ((p * (1 - p) / trials + z * z / (4 * trials * trials)) ** 0.5) / denominator
+    return max(0.0, centre - half), min(1.0, centre + half)

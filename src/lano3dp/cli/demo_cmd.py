@@ -1,7 +1,206 @@
-"""Placeholder until its owner lands the command."""
+"""`lano3dp demo`: the whole method on one task, in minutes on a CPU, with a report.
+
+Stages (each skipped when its output already exists, so a re-run continues):
+    1. collect   scripted-expert demonstrations (no obstacles: the policy never sees one in training)
+    2. train     a small object-centric diffusion policy for a wall-clock budget
+    3. evaluate  closed loop: clean scenes; scenes with a novel obstacle on the path, without and with
+                 the paper's cost guidance (A_0|k)
+    4. report    report.md with a results table, a rates plot, a top-view plot of one episode with and
+                 without guidance, and a video
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+import time
+from pathlib import Path
 
 import typer
 
 
 def register(app: typer.Typer) -> None:
-    pass
+    app.command("demo")(demo_command)
+
+
+def demo_command(
+    out: Path = typer.Option(Path("lano3dp_demo"), help="Output folder (re-running with it resumes)."),
+    task: str = typer.Option("bowl_pour", help="Simulator task."),
+    demos: int = typer.Option(30, min=2, help="Scripted-expert demonstrations to collect."),
+    minutes: float = typer.Option(6.0, help="Training budget in minutes (the step count is measured from it)."),
+    steps: int = typer.Option(None, help="Train exactly this many steps instead of a time budget."),
+    episodes: int = typer.Option(10, min=1, help="Evaluation episodes per condition."),
+    rho: float = typer.Option(0.5, help="Guidance scale rho."),
+    last_steps: int = typer.Option(10, help="Guide the last S training-scale denoising steps."),
+    workers: int = typer.Option(2, min=1, help="Parallel evaluation processes."),
+    seed: int = typer.Option(0, help="Seed of the collection and training."),
+) -> None:
+    """Collect, train, evaluate with and without a novel obstacle and guidance, and write a report."""
+    from rich.console import Console
+
+    from lano3dp.errors import Lano3dpError
+
+    console = Console()
+    try:
+        report = run_demo(out=out, task=task, demos=demos, minutes=minutes, steps=steps, episodes=episodes, rho=rho,
+                          last_steps=last_steps, workers=workers, seed=seed, console=console)
+    except Lano3dpError as error:
+        console.print(f"[red]error:[/red] {error}")
+        raise typer.Exit(1) from error
+    console.print(f"[bold green]report:[/bold green] {report}")
+
+
+CONDITIONS = (
+    # name, variation, guidance
+    ("clean", "clean", "none"),
+    ("obstacle, no guidance", "obstacle", "none"),
+    ("obstacle, guidance", "obstacle", "clean"),
+)
+
+
+def run_demo(*, out: Path, task: str, demos: int, minutes: float, steps: int | None, episodes: int, rho: float,
+             last_steps: int, workers: int, seed: int, console) -> Path:
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from lano3dp.evaluate import EvalConfig, write_json
+    from lano3dp.pipeline import collect_stage, eval_stage, train_stage
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    command = shlex.join(["lano3dp", *sys.argv[1:]])
+    timings_path = out / "timings.json"
+    timings = json.loads(timings_path.read_text()) if timings_path.exists() else {}
+    started = time.perf_counter()
+
+    def log(message: str) -> None:
+        console.print(f"[cyan]{time.perf_counter() - started:6.0f}s[/cyan] {message}")
+
+    def timed(name: str, function):
+        began = time.perf_counter()
+        value = function()
+        elapsed = time.perf_counter() - began
+        if elapsed > 1.0 or name not in timings:  # a skipped stage keeps the time it took when it ran
+            timings[name] = round(elapsed, 1)
+        write_json(timings_path, timings)
+        return value
+
+    console.rule(f"[bold]lano3dp demo: {task}[/bold]")
+    log(f"1/4 collecting {demos} scripted-expert demonstrations of {task} (clean scenes, no obstacles)")
+    data = timed("collect_s", lambda: collect_stage(task, demos, out / "data" / f"{task}.zarr", log=log, seed=seed))
+
+    budget = f"{steps} steps" if steps else f"{minutes:g} min"
+    log(f"2/4 training a small object-centric diffusion policy ({budget})")
+    checkpoint = timed("train_s", lambda: train_stage(data, out / "run", steps=steps, minutes=minutes, seed=seed,
+                                                      log=log))
+
+    log(f"3/4 evaluating {episodes} episodes per condition: " + "; ".join(c[0] for c in CONDITIONS))
+    results = {}
+    for name, variation, guidance in CONDITIONS:
+        slug = name.replace(", ", "_").replace(" ", "_")
+        config = EvalConfig(checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
+                            guidance=guidance, rho=rho, last_steps=last_steps, workers=workers,
+                            video_dir=str(out / "videos" / slug) if variation == "obstacle" else None, n_videos=1,
+                            out=str(out / "eval" / f"{slug}.json"))
+        with Progress(TextColumn(f"  {name:<24}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      TextColumn("{task.fields[status]}"), console=console) as bar:
+            handle = bar.add_task(name, total=episodes, status="")
+            tally = {"success": 0, "collided": 0}
+
+            def progress(done, total, record, bar=bar, handle=handle, tally=tally):
+                tally["success"] += bool(record["success"])
+                tally["collided"] += bool(record["collided"])
+                bar.update(handle, completed=done,
+                           status=f"success {tally['success']}/{done}, collided {tally['collided']}/{done}")
+
+            results[name] = timed(f"eval_{slug}_s", lambda config=config, progress=progress: eval_stage(
+                config, log=log, progress=progress, command=command))
+        from lano3dp.cli.eval_cmd import summary_line
+
+        log(f"   {name}: {summary_line(results[name]['summary'])}")
+
+    log("4/4 writing the report")
+    timings["total_this_run_s"] = round(time.perf_counter() - started, 1)
+    write_json(timings_path, timings)
+    report = write_demo_report(out, task=task, checkpoint=Path(checkpoint), results=results, timings=timings,
+                               command=command, rho=rho, last_steps=last_steps)
+    log(f"done in {time.perf_counter() - started:.0f} s")
+    return report
+
+
+def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, timings: dict, command: str,
+                      rho: float, last_steps: int) -> Path:
+    """report.md + rates.png + top_view.png from the evaluation results."""
+    from lano3dp.data.store import EpisodeStore
+    from lano3dp.policy import DiffusionPolicy
+    from lano3dp.report import centimetres, markdown_table, percent, plot_rates, plot_top_view, wilson_interval
+
+    policy = DiffusionPolicy.from_pretrained(checkpoint)
+    parameters = sum(p.numel() for p in policy.parameters())
+    train_config = json.loads((checkpoint / "train_config.json").read_text())
+    store = EpisodeStore.open(train_config["data"])
+
+    rows = []
+    for name, result in results.items():
+        s = result["summary"]
+        low, high = wilson_interval(s["successes"], s["episodes"])
+        rows.append([name, s["episodes"], f"{percent(s['success_rate'])} ({percent(low)}–{percent(high)})",
+                     percent(s["collision_rate"]), percent(s["safe_success_rate"]),
+                     centimetres(s["mean_min_clearance"]), f"{s['mean_path_length']:.2f} m",
+                     f"{1000 * s['latency_mean_s']:.0f} ms" if s["latency_mean_s"] else None])
+    plot_rates(out / "rates.png", [(name, r["summary"]) for name, r in results.items()],
+               title=f"{task}: {store.n_episodes} demos, {train_config['steps']} training steps")
+
+    # one paired scene (same seed) with and without guidance: prefer one where guidance changed the outcome
+    plain, guided = results["obstacle, no guidance"]["episodes"], results["obstacle, guidance"]["episodes"]
+    pairs = list(zip(plain, guided, strict=True))
+    pick = next((p for p in pairs if p[0]["collided"] and not p[1]["collided"]), pairs[0])
+    runs = [(f"no guidance (seed {pick[0]['seed']}): " + ("collided" if pick[0]["collided"] else "no contact"),
+             pick[0]["ee_path"]),
+            ("guidance A_0|k: " + ("collided" if pick[1]["collided"] else "no contact"), pick[1]["ee_path"])]
+    plot_top_view(out / "top_view.png", runs, obstacles=pick[1]["obstacles"] or pick[0]["obstacles"],
+                  title=f"{task}, novel obstacle: executed EE path, top view")
+    videos = [e.get("video") for r in results.values() for e in r["episodes"] if e.get("video")]
+
+    timing_rows = [[k.removesuffix("_s").replace("_", " "), f"{v:.0f} s"] for k, v in timings.items()]
+    lines = [
+        f"# lano3dp demo: {task}",
+        "",
+        f"Made by `{command}` on {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}.",
+        "",
+        "A small Lan-o3dp policy (object clouds of the task's objects + robot state -> diffusion over EE actions) "
+        f"trained on **{store.n_episodes} scripted demonstrations** of clean scenes, then run in closed loop on new "
+        "scenes: clean ones, and ones with a **novel obstacle** on the expert's path (never seen in training), "
+        f"without and with the paper's cost guidance on A_0|k (rho = {rho:g}, last S = {last_steps} steps; the "
+        "obstacle is segmented, fitted with a vertical cylinder, and Q* = its radius + the held object's extent "
+        "+ 2 cm).",
+        "",
+        f"Policy: {parameters / 1e6:.2f} M parameters, UNet {tuple(policy.config.down_dims)}, "
+        f"{policy.config.n_points} points per object, obs {policy.config.n_obs_steps} steps, horizon "
+        f"{policy.config.horizon}, {policy.config.n_action_steps} actions per chunk; trained "
+        f"{train_config['steps']} steps at batch {train_config['batch_size']}, lr {train_config['lr']:g}; "
+        f"sampling {policy.config.inference_scheduler.upper()}-{policy.config.num_inference_steps}.",
+        "",
+        "## Results",
+        "",
+        markdown_table(["condition", "episodes", "success (95% CI)", "obstacle contact", "success w/o contact",
+                        "mean min clearance", "mean path", "latency / chunk"], rows),
+        "",
+        "![rates](rates.png)",
+        "",
+        "![top view](top_view.png)",
+        "",
+        *(f"- video: [{Path(v).relative_to(out)}]({Path(v).relative_to(out)})" for v in videos),
+        "",
+        "Read with care: a policy trained for minutes on a CPU, and few episodes per condition (see the intervals). "
+        "Contacts and clearances are the simulator's ground truth; latency includes perception and was measured "
+        "with the evaluation workers sharing the CPU.",
+        "",
+        "## Time",
+        "",
+        markdown_table(["stage", "wall time"], timing_rows),
+        "",
+    ]
+    report = out / "report.md"
+    report.write_text("\n".join(lines))
+    return report

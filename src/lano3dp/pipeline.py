@@ -1,0 +1,145 @@
+"""Resumable stages shared by `lano3dp demo` and bench/bench_protocol.py: collect, train, evaluate.
+
+Each stage checks what is already on disk and does only what is missing, so re-running a demo or a
+benchmark with the same output folder continues where it stopped:
+
+    collect_stage    a zarr dataset with at least N episodes (collection appends to an existing store)
+    train_stage      a training run up to its step count (the trainer resumes from its last checkpoint);
+                     with a wall-clock budget the step count is chosen once, from a short timing probe,
+                     and saved in the run's train_config.json, so a resumed run keeps it
+    eval_stage       a results JSON, reused when it was made with the same EvalConfig
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+Log = Callable[[str], None]
+
+
+def _quiet(_: str) -> None:
+    pass
+
+
+# ---- collect ---------------------------------------------------------------------------------------
+def dataset_episodes(path: str | Path) -> int:
+    """Episodes already in a store (0 when there is none)."""
+    from lano3dp.data.store import EpisodeStore
+
+    path = Path(path)
+    if not path.exists():
+        return 0
+    return EpisodeStore.open(path).n_episodes
+
+
+def collect_stage(task: str, episodes: int, out: str | Path, *, log: Log = _quiet, **options) -> Path:
+    """Scripted-expert demonstrations of `task` into `out` until it holds `episodes` episodes.
+
+    `options` go to `lano3dp.sim.collect.collect` (e.g. variation, seed, image_size).
+    """
+    from lano3dp.sim.collect import collect
+
+    out = Path(out)
+    have = dataset_episodes(out)
+    if have >= episodes:
+        log(f"collect: {out} already has {have} episodes of {task}; skipping")
+        return out
+    log(f"collect: {episodes - have} more scripted-expert episodes of {task} -> {out}")
+    started = time.perf_counter()
+    collect(task=task, episodes=episodes, out=out, **options)
+    log(f"collect: done in {time.perf_counter() - started:.0f} s ({dataset_episodes(out)} episodes)")
+    return out
+
+
+# ---- train -----------------------------------------------------------------------------------------
+def time_training_step(data: str | Path, policy_config, batch_size: int, *, warmup: int = 2, steps: int = 4,
+                       seed: int = 0) -> float:
+    """Seconds per optimisation step of `policy_config` on `data` at this batch size, measured here and now.
+
+    A throwaway model does `warmup` + `steps` real steps (data windows, forward, backward, fused AdamW), so the
+    number includes this machine's current load. Used only to turn a time budget into a step count.
+    """
+    import numpy as np
+    import torch
+    from torch.utils.data import default_collate
+
+    from lano3dp.data import SequenceDataset
+    from lano3dp.policy import DiffusionPolicy
+
+    dataset = SequenceDataset(data, obs_keys=policy_config.obs_keys, n_obs_steps=policy_config.n_obs_steps,
+                              horizon=policy_config.horizon, n_action_steps=policy_config.n_action_steps)
+    torch.manual_seed(seed)
+    policy = DiffusionPolicy(policy_config)
+    policy.fit_normalizer(dataset)
+    optimizer = torch.optim.AdamW(policy.parameters(), lr=1e-4, fused=True)
+    rng = np.random.default_rng(seed)
+    generator = torch.Generator().manual_seed(seed)
+    times = []
+    for index in range(warmup + steps):
+        batch = default_collate([dataset[int(i)] for i in rng.integers(0, len(dataset), batch_size)])
+        started = time.perf_counter()
+        loss = policy.compute_loss(batch, generator=generator)
+        optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        optimizer.step()
+        if index >= warmup:
+            times.append(time.perf_counter() - started)
+    return float(np.median(times))
+
+
+def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps: int | None = None,
+                minutes: float | None = None, min_steps: int = 200, max_steps: int = 20_000, batch_size: int = 64,
+                lr: float = 1e-3, warmup_steps: int | None = None, ckpt_every: int | None = None, seed: int = 0,
+                log: Log = _quiet, **train_options) -> Path:
+    """Train (or resume, or skip) a policy run; returns its final checkpoint folder.
+
+    Give either `steps`, or `minutes` (a wall-clock budget for the optimisation itself: the step count is
+    probed once, see `time_training_step`). An existing run keeps the step count it was started with.
+    """
+    from lano3dp.policy.checkpoint import list_checkpoints
+    from lano3dp.train import TrainConfig, policy_config_for_dataset, train
+
+    run = Path(run)
+    saved = run / "train_config.json"
+    if saved.exists():
+        config = TrainConfig.from_dict(json.loads(saved.read_text()))
+        done = max((step for step, _ in list_checkpoints(run / "checkpoints")), default=0)
+        if done >= config.steps:
+            log(f"train: {run} is complete ({config.steps} steps); skipping")
+            return run / "checkpoints" / f"step_{config.steps:07d}"
+        log(f"train: resuming {run} at step {done} of {config.steps}")
+    else:
+        policy_config = policy_config or policy_config_for_dataset(data)
+        if steps is None:
+            if minutes is None:
+                raise ValueError("train_stage needs steps or minutes")
+            seconds = time_training_step(data, policy_config, batch_size, seed=seed)
+            steps = int(min(max(minutes * 60 / seconds, min_steps), max_steps))
+            log(f"train: {seconds:.3f} s/step measured now -> {steps} steps fit {minutes:g} min")
+        warmup = warmup_steps if warmup_steps is not None else min(500, max(steps // 10, 10))
+        config = TrainConfig(data=str(data), out=str(run), policy=policy_config, steps=steps, batch_size=batch_size,
+                             lr=lr, warmup_steps=warmup, ckpt_every=ckpt_every or steps,
+                             val_every=ckpt_every or steps, seed=seed, **train_options)
+        log(f"train: {steps} steps, batch {batch_size}, lr {lr:g}, UNet {tuple(policy_config.down_dims)} -> {run}")
+    started = time.perf_counter()
+    final = train(config)
+    log(f"train: done in {time.perf_counter() - started:.0f} s -> {final}")
+    return Path(final)
+
+
+# ---- evaluate --------------------------------------------------------------------------------------
+def eval_stage(config, *, log: Log = _quiet, progress=None, command: str | None = None) -> dict[str, Any]:
+    """Evaluate unless `config.out` already holds results made with this exact EvalConfig."""
+    from lano3dp.evaluate import evaluate
+
+    if config.out and Path(config.out).exists():
+        previous = json.loads(Path(config.out).read_text())
+        if previous.get("config") == json.loads(json.dumps(asdict(config))):
+            log(f"eval: {config.out} is up to date; skipping")
+            return previous
+    return evaluate(config, progress=progress, command=command)

@@ -18,7 +18,7 @@ import torch
 from lano3dp.errors import Lano3dpError
 from lano3dp.geometry.rotations import matrix_to_rot6d
 from lano3dp.guidance import CheckConfig, Cylinder, GuidanceConfig
-from lano3dp.perception import ObjectObserver, SimOracleSegmenter
+from lano3dp.perception import ObjectNotFoundError, ObjectObserver, SimOracleSegmenter
 from lano3dp.perception.synthetic import Box, render_boxes, top_down_camera
 from lano3dp.policy import ActionChunk, PolicyConfig
 from lano3dp.runtime import (
@@ -285,6 +285,31 @@ def test_image_and_scene_policies_get_their_own_inputs(observer):
     cloud = scene_runner.policy_obs()["scene_cloud"]
     assert cloud.shape == (1, 2, 512, 3)
     assert (cloud[..., 2] > 0).all()  # the table is removed
+
+
+def test_a_target_hidden_after_the_first_frame_keeps_its_previous_cloud(observer):
+    env = FakeEnv([BOWL, PAN])
+    obs, _ = env.reset(seed=0)
+    frame, state = observe(env, obs)
+    runner = PolicyRunner(FakePolicy(), observer)
+    runner.push(frame, state)
+    first = runner.policy_obs()["object_clouds"][0, -1]
+    hidden_pan = render_boxes(frame.camera, [BOWL])  # the pan is gone from view (occluded)
+    runner.push(hidden_pan, state)
+    second = runner.policy_obs()["object_clouds"][0, -1]
+    np.testing.assert_array_equal(second[1], first[1])
+    assert runner.held_clouds == 1
+
+    fresh = PolicyRunner(FakePolicy(), observer)
+    with pytest.raises(ObjectNotFoundError, match="'pan'"):  # never seen: nothing to hold
+        fresh.push(hidden_pan, state)
+
+
+def test_resize_rgb_matches_the_demonstration_collector():
+    from lano3dp.data.collect import resize_rgb as collector_resize
+
+    image = np.random.default_rng(0).integers(0, 256, (128, 128, 3), dtype=np.uint8)
+    np.testing.assert_array_equal(resize_rgb(image, 96), collector_resize(image, 96))
 
 
 def test_resize_rgb_averages_areas():

@@ -5,7 +5,8 @@
     result["summary"]["success_rate"], result["summary"]["collision_rate"]
 
 Each episode is a fresh `TabletopEnv` scene from its seed (seed, seed + 1, ...; the default first
-seed 100000 keeps evaluation scenes apart from demonstration seeds, which start at 0). Episodes run in
+seed 1000000 keeps evaluation scenes apart from demonstration seeds: 0, 1, ... and their retries
+at multiples of 100003, see data.collect). Episodes run in
 `workers` spawned processes with one torch thread each (two OpenMP threads per process stall on a
 shared 2-core machine; notes/cpu-cost.md sec. 1), and results come back in seed order, so the JSON does
 not depend on the number of workers. Latencies measured with several workers include their contention.
@@ -36,7 +37,7 @@ import numpy as np
 
 from lano3dp.errors import Lano3dpError
 
-DEFAULT_EVAL_SEED = 100_000
+DEFAULT_EVAL_SEED = 1_000_000
 SUMMARY_FIELDS = ("episodes", "success_rate", "collision_rate", "safe_success_rate", "error_rate",
                   "mean_min_clearance", "mean_path_length", "mean_steps", "latency_mean_s", "latency_p95_s")
 
@@ -125,7 +126,7 @@ def dataset_settings(checkpoint: str | Path) -> DatasetSettings:
         attrs = EpisodeStore.open(data).attrs
         camera = attrs.get("camera") or {}
         low, high = attrs.get("crop_low"), attrs.get("crop_high")
-        return DatasetSettings(task=attrs.get("task"), image_size=camera.get("height"),
+        return DatasetSettings(task=attrs.get("task"), image_size=attrs.get("image_size") or camera.get("height"),
                                n_points=attrs.get("n_points"), crop_low=None if low is None else tuple(low),
                                crop_high=None if high is None else tuple(high), data=str(data))
     return DatasetSettings()

@@ -204,13 +204,14 @@ def scene_obstacles(frame: RGBDFrame) -> list[str]:
 
 
 def resize_rgb(rgb: np.ndarray, size: int) -> np.ndarray:
-    """(H, W, 3) uint8 -> (size, size, 3) uint8 by area averaging (antialiased), as the image baseline sees it."""
+    """(H, W, 3) uint8 -> (size, size, 3) uint8, area-averaged with PIL's box filter: exactly what the
+    demonstration collector stores (`data.collect.resize_rgb`), so the image baseline sees the same pixels."""
     if rgb.shape[:2] == (size, size):
         return np.ascontiguousarray(rgb, dtype=np.uint8)
-    image = torch.from_numpy(np.ascontiguousarray(rgb)).permute(2, 0, 1)[None].float()
-    resized = torch.nn.functional.interpolate(image, size=(size, size), mode="bilinear", antialias=True,
-                                              align_corners=False)
-    return resized[0].permute(1, 2, 0).round().clamp(0, 255).to(torch.uint8).numpy()
+    from PIL import Image
+
+    return np.asarray(Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8)).resize(
+        (size, size), Image.Resampling.BOX))
 
 
 class PolicyRunner:
@@ -264,6 +265,8 @@ class PolicyRunner:
         self.obstacles: ObstacleSet | None = None
         self.held_radius: float | None = None
         self.step_count = 0
+        self.held_clouds = 0  # frames in which a hidden target kept its previous cloud
+        self._last_clouds: np.ndarray | None = None
         self.stopped_reason: str | None = None
         self.generator = torch.Generator().manual_seed(self.config.seed)
 
@@ -277,6 +280,8 @@ class PolicyRunner:
         self.obstacles = None
         self.held_radius = None
         self.step_count = 0
+        self.held_clouds = 0
+        self._last_clouds = None
         self.stopped_reason = None
         self.generator = torch.Generator().manual_seed(self.config.seed if seed is None else int(seed))
 
@@ -302,7 +307,7 @@ class PolicyRunner:
     def _default_visual(self, frame: RGBDFrame) -> np.ndarray:
         pc = self.policy_config
         if pc.obs_type == "objects":
-            return self.observer.observe(frame, self.target_phrases).points
+            return self.object_clouds(frame)
         if pc.obs_type == "scene":
             from lano3dp.perception.observer import scene_cloud
 
@@ -311,6 +316,31 @@ class PolicyRunner:
             high = None if observer is None else observer.crop_high
             return scene_cloud(frame, n_points=pc.scene_points, crop_low=low, crop_high=high)
         return resize_rgb(frame.rgb, pc.image_size)
+
+    def object_clouds(self, frame: RGBDFrame) -> np.ndarray:
+        """(K, N, 3) target clouds in slot order.
+
+        A target that is momentarily hidden (too few points, e.g. the pan under the tilted bowl) keeps its
+        previous cloud, as a video tracker would and as the demonstrations were recorded
+        (`data.collect`); a target missing from the first frame is an error the caller sees.
+        """
+        from lano3dp.perception.exceptions import PerceptionError
+
+        try:
+            clouds = self.observer.observe(frame, self.target_phrases).points
+        except PerceptionError:
+            if self._last_clouds is None:
+                raise
+            clouds = []
+            for slot, phrase in enumerate(self.target_phrases):
+                try:
+                    clouds.append(self.observer.observe(frame, [phrase]).points[0])
+                except PerceptionError:
+                    clouds.append(self._last_clouds[slot])
+                    self.held_clouds += 1
+            clouds = np.stack(clouds)
+        self._last_clouds = clouds
+        return clouds
 
     def push(self, frame: RGBDFrame, state: np.ndarray) -> None:
         """Add one observation (frame, state (11,)) to the window; the first one also fits the obstacles."""
@@ -438,6 +468,7 @@ class EpisodeResult:
         ee_path: (steps + 1, 3) EE positions, metres (kept for plots; dropped from JSON by default).
         obstacles: the fitted obstacle shapes the runner guided against (see `describe_obstacle`).
         held_radius: m, the held extent used in Q*.
+        held_clouds: target clouds carried over from the previous frame because the target was hidden.
         error: why the episode ended early (perception failure, no clear chunk), or None.
         wall_s: wall time of the episode, seconds.
     """
@@ -455,6 +486,7 @@ class EpisodeResult:
     ee_path: np.ndarray
     obstacles: list[dict[str, Any]] = field(default_factory=list)
     held_radius: float | None = None
+    held_clouds: int = 0
     error: str | None = None
     wall_s: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
@@ -562,5 +594,6 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
                                    for c in runner.chunks],
         ee_path=ee_path,
         obstacles=[describe_obstacle(o) for o in runner.obstacles] if runner.obstacles is not None else [],
-        held_radius=runner.held_radius, error=error, wall_s=time.perf_counter() - started,
+        held_radius=runner.held_radius, held_clouds=runner.held_clouds, error=error,
+        wall_s=time.perf_counter() - started,
     )

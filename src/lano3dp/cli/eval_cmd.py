@@ -33,7 +33,7 @@ def eval_command(
     workers: int = typer.Option(1, min=1, help="Parallel episode processes (1 torch thread each)."),
     video_dir: Path = typer.Option(None, help="Write MP4s of the first --n-videos episodes here."),
     n_videos: int = typer.Option(2, help="How many episodes get a video."),
-    seed: int = typer.Option(100_000, help="First episode seed (apart from the demonstration seeds)."),
+    seed: int = typer.Option(1_000_000, help="First episode seed (apart from the demonstration seeds)."),
     out: Path = typer.Option(Path("results.json"), help="Results JSON."),
 ) -> None:
     """Evaluate a policy: success, obstacle contacts, minimum clearance, path length and latency per chunk."""

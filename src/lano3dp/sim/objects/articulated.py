@@ -477,3 +477,66 @@ def add_wine_bottle(builder: SceneBuilder, name: str, position, yaw: float = 0.0
     info = ObjectInfo(name, "bottle", color, size_word(scale), p.bodies, p.radius + 0.01, np.array(body.pos), role,
                       np.array([p.radius, p.radius, top]))
     return builder.register(info)
+
+
+# ------------------------------------------------------------------------- watering can and plant
+
+CAN_RADIUS, CAN_HEIGHT, CAN_WALLS, CAN_WALL_HALF = 0.045, 0.09, 12, 0.004
+POT_RADIUS, POT_HEIGHT, SOIL_HEIGHT = 0.06, 0.07, 0.04
+PALETTE_SOIL = (0.30, 0.20, 0.12, 1.0)
+
+
+def _ring(body, name: str, radius: float, half_height: float, half_thickness: float, count: int, z: float,
+          color, mass: float) -> None:
+    """`count` wall boxes around a circle: a cylinder shell made of primitives (wall k at angle 2 pi k / count)."""
+    half_width = radius * np.tan(np.pi / count) + half_thickness
+    for k in range(count):
+        angle = 2 * np.pi * k / count
+        body.add_geom(name=f"{name}/wall{k}", type=BOX, size=[half_thickness, half_width, half_height],
+                      pos=[radius * np.cos(angle), radius * np.sin(angle), z], quat=yaw_quat(angle), rgba=list(color),
+                      mass=mass / count)
+
+
+def add_watering_can(builder: SceneBuilder, name: str, position, yaw: float = 0.0, color: str = "green",
+                     scale: float = 1.0, role: str = "target") -> ObjectInfo:
+    """A free open can (radius 4.5 cm, 9 cm tall at scale 1, 12 wall boxes on a disc) with a spout
+    along its local +x axis. The spout is visual only (no contacts): water leaves over the rim on
+    the spout side, and a colliding spout would catch it."""
+    radius, height, t = CAN_RADIUS * scale, CAN_HEIGHT * scale, CAN_WALL_HALF
+    colour = rgba(color)
+    body = builder.world.add_body(name=name, pos=[float(position[0]), float(position[1]), 0.0], quat=yaw_quat(yaw))
+    body.add_freejoint(name=f"{name}/free")
+    body.add_geom(name=f"{name}/base", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[radius + t, 0.004, 0],
+                  pos=[0, 0, 0.004], rgba=colour, mass=0.06)
+    _ring(body, name, radius, height / 2, t, CAN_WALLS, height / 2, colour, mass=0.09)
+    body.add_geom(name=f"{name}/spout", type=CAPSULE, size=[0.007, 0, 0], rgba=colour, contype=0, conaffinity=0,
+                  fromto=[radius, 0, 0.45 * height, radius + 0.06 * scale, 0, 0.45 * height + 0.05 * scale],
+                  mass=0.005)
+    info = ObjectInfo(name, "watering can", color, size_word(scale), (name,), radius + 0.07 * scale,
+                      np.array(body.pos), role, np.array([radius + 0.065 * scale, radius + t, height]))
+    return builder.register(info)
+
+
+def add_plant(builder: SceneBuilder, name: str, position, yaw: float = 0.0, color: str = "orange",
+              scale: float = 1.0, role: str = "target") -> ObjectInfo:
+    """A static potted plant: a pot (radius 6 cm, 7 cm tall at scale 1) filled with soil to 4 cm,
+    and a stem with leaves that are visual only (no contacts), so water poured on the plant
+    reaches the soil. `color` is the pot's."""
+    radius, height, t = POT_RADIUS * scale, POT_HEIGHT * scale, CAN_WALL_HALF
+    body = builder.world.add_body(name=name, pos=[float(position[0]), float(position[1]), 0.0], quat=yaw_quat(yaw))
+    colour = rgba(color)
+    soil = SOIL_HEIGHT * scale
+    body.add_geom(name=f"{name}/soil", type=mujoco.mjtGeom.mjGEOM_CYLINDER, size=[radius, soil / 2, 0],
+                  pos=[0, 0, soil / 2], rgba=list(PALETTE_SOIL))
+    _ring(body, name, radius, height / 2, t, 16, height / 2, colour, mass=0.0)
+    leaf = rgba("green")
+    body.add_geom(name=f"{name}/stem", type=CAPSULE, size=[0.004, 0, 0], rgba=leaf, contype=0, conaffinity=0,
+                  fromto=[0, 0, soil, 0.01, 0, soil + 0.1 * scale])
+    for i, (dx, dy, dz) in enumerate(((0.025, 0.0, 0.10), (-0.015, 0.02, 0.085), (-0.01, -0.025, 0.115))):
+        body.add_geom(name=f"{name}/leaf{i}", type=mujoco.mjtGeom.mjGEOM_ELLIPSOID, rgba=leaf, contype=0,
+                      conaffinity=0, size=[0.03 * scale, 0.015 * scale, 0.006 * scale],
+                      pos=[dx * scale, dy * scale, soil + dz * scale], quat=yaw_quat(2.1 * i))
+    info = ObjectInfo(name, "plant", color, size_word(scale), (name,), radius + 0.02, np.array(body.pos), role,
+                      np.array([radius + 2 * t, radius + 2 * t, soil + 0.13 * scale]))
+    return builder.register(info)
+

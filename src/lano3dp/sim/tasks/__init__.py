@@ -41,4 +41,5 @@ from lano3dp.sim.tasks import (  # noqa: E402,F401
     open_wine_bottle,
     phone_on_base,
     put_item_in_drawer,
+    water_plants,
 )

@@ -419,7 +419,8 @@ def ground_obstacles(frame, phrases: Sequence[str]) -> tuple[list[str], list[str
     return kept, notes
 
 
-def run_instruction(config: RunConfig, log: Callable[[str], None] = print) -> dict[str, Any]:
+def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
+                    command: str | None = None) -> dict[str, Any]:
     """Plan, perceive, act: one episode for one instruction. Writes run.json, video.mp4 and top_view.png."""
     from lano3dp.language import OfflineDecomposer, SkillRegistry, UnknownObjectError, default_registry
     from lano3dp.perception import ObjectObserver, SimOracleSegmenter
@@ -494,7 +495,8 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print) -> di
             pass
     plot = plot_top_view(out / "top_view.png", paths, obstacles=first["obstacles"], objects=objects,
                          title=f"'{config.instruction}'")
-    result = {"command": shlex.join(["lano3dp", *sys.argv[1:]]), "config": asdict(config), "plan": plan.model_dump(),
+    result = {"command": command or shlex.join(["lano3dp", *sys.argv[1:]]), "config": asdict(config),
+              "plan": plan.model_dump(),
               "task": task, "variation": variation, "obstacles": obstacles, "notes": notes,
               "checkpoint": str(checkpoint), "episodes": episodes, "top_view": str(plot)}
     write_json(out / "run.json", result)

@@ -12,8 +12,6 @@ Stages (each skipped when its output already exists, so a re-run continues):
 from __future__ import annotations
 
 import json
-import shlex
-import sys
 import time
 from pathlib import Path
 
@@ -25,6 +23,7 @@ def register(app: typer.Typer) -> None:
 
 
 def demo_command(
+    ctx: typer.Context,
     out: Path = typer.Option(Path("lano3dp_demo"), help="Output folder (re-running with it resumes)."),
     task: str = typer.Option("bowl_pour", help="Simulator task."),
     demos: int = typer.Option(30, min=2, help="Scripted-expert demonstrations to collect."),
@@ -39,11 +38,13 @@ def demo_command(
     """Collect, train, evaluate with and without a novel obstacle and guidance, and write a report."""
     from rich.console import Console
 
+    from lano3dp.cli.eval_cmd import command_line
     from lano3dp.errors import Lano3dpError
 
     console = Console()
     try:
-        report = run_demo(out=out, task=task, demos=demos, minutes=minutes, steps=steps, episodes=episodes, rho=rho,
+        report = run_demo(command=command_line(ctx), out=out, task=task, demos=demos, minutes=minutes, steps=steps,
+                          episodes=episodes, rho=rho,
                           last_steps=last_steps, workers=workers, seed=seed, console=console)
     except Lano3dpError as error:
         console.print(f"[red]error:[/red] {error}")
@@ -59,8 +60,8 @@ CONDITIONS = (
 )
 
 
-def run_demo(*, out: Path, task: str, demos: int, minutes: float, steps: int | None, episodes: int, rho: float,
-             last_steps: int, workers: int, seed: int, console) -> Path:
+def run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, steps: int | None, episodes: int,
+             rho: float, last_steps: int, workers: int, seed: int, console) -> Path:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from lano3dp.evaluate import EvalConfig, write_json
@@ -68,7 +69,6 @@ def run_demo(*, out: Path, task: str, demos: int, minutes: float, steps: int | N
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    command = shlex.join(["lano3dp", *sys.argv[1:]])
     timings_path = out / "timings.json"
     timings = json.loads(timings_path.read_text()) if timings_path.exists() else {}
     started = time.perf_counter()

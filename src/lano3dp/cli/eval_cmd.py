@@ -12,6 +12,7 @@ def register(app: typer.Typer) -> None:
 
 
 def eval_command(
+    ctx: typer.Context,
     checkpoint: Path = typer.Option(..., "--checkpoint", "-c",
                                     help="Policy folder or training run (its last checkpoint)."),
     task: str = typer.Option(None, help="Task name (default: the task of the checkpoint's dataset)."),
@@ -63,7 +64,7 @@ def eval_command(
             collisions += bool(record["collided"])
             bar.update(handle, completed=done, status=f"success {successes}/{done}  collided {collisions}/{done}")
 
-        result = evaluate(config, progress=progress)
+        result = evaluate(config, progress=progress, command=command_line(ctx))
     console.print(summary_line(result["summary"]))
     summary = result["summary"]
     if summary["errors"]:
@@ -81,3 +82,27 @@ def summary_line(summary: dict) -> str:
     if summary["latency_mean_s"] is not None:
         parts.append(f"latency {summary['latency_mean_s'] * 1000:.0f} ms/chunk")
     return ", ".join(parts)
+
+
+def command_line(ctx: typer.Context) -> str:
+    """The command as typed, rebuilt from the parsed parameters (so it is right under any launcher or test
+    runner); options left at their defaults are omitted."""
+    import shlex
+
+    import click
+
+    parts = ["lano3dp", ctx.info_name or ""]
+    for param in ctx.command.params:
+        value = ctx.params.get(param.name)
+        if value is None or value == param.default or (param.multiple and not value):
+            continue
+        if isinstance(param, click.Argument):
+            parts.append(str(value))
+        elif getattr(param, "is_flag", False):
+            parts.append(param.opts[0] if value else (param.secondary_opts or param.opts)[0])
+        elif param.multiple:
+            for item in value:
+                parts += [param.opts[0], str(item)]
+        else:
+            parts += [param.opts[0], str(value)]
+    return shlex.join(parts)

@@ -12,6 +12,7 @@ def register(app: typer.Typer) -> None:
 
 
 def run_command(
+    ctx: typer.Context,
     instruction: str = typer.Argument(..., help='e.g. "pour the bowl into the pan and keep clear of the obstacle"'),
     checkpoint: Path = typer.Option(None, "--checkpoint", "-c", help="Policy to run (default: from --registry)."),
     registry: Path = typer.Option(None, help="Skill registry JSON naming a checkpoint per skill."),
@@ -31,6 +32,7 @@ def run_command(
     """Run one instruction in the simulator and show what happened (plan, outcome, video, top-view plot)."""
     from rich.console import Console
 
+    from lano3dp.cli.eval_cmd import command_line
     from lano3dp.errors import Lano3dpError
     from lano3dp.evaluate import RunConfig, run_instruction
 
@@ -40,7 +42,7 @@ def run_command(
                        guidance=guidance, rho=rho, last_steps=last_steps, scheduler=scheduler, steps=steps,
                        checked=checked, compare=compare, max_steps=max_steps, seed=seed, out=str(out))
     try:
-        result = run_instruction(config, log=console.print)
+        result = run_instruction(config, log=console.print, command=command_line(ctx))
     except (Lano3dpError, ValueError, FileNotFoundError) as error:
         console.print(f"[red]error:[/red] {error}")
         raise typer.Exit(1) from error

@@ -15,12 +15,12 @@ from lano3dp.sim import TabletopEnv, make_task
 from lano3dp.sim.variations import Variation
 
 TASKS = ("open_drawer", "bottle_in_drawer", "close_microwave", "put_item_in_drawer", "phone_on_base",
-         "open_wine_bottle", "water_plants")
+         "open_wine_bottle", "water_plants", "sweep_to_dustpan")
 # Size measure per slot: the axis of the object's own bounding box that scales with the instance
-# (heights of cabinet, box, bottle and block scale exactly; the phone's and the base's thickness
-# does not, their length does).
+# (heights of cabinet, box, bottles, block, can and plant scale exactly; the thickness of the phone,
+# the base, the broom and the dustpan's walls does not, their length does).
 SIZE_AXIS = {"drawer": 2, "microwave": 2, "bottle": 2, "block": 2, "phone": 0, "base": 0, "watering can": 2,
-             "plant": 2}
+             "plant": 2, "broom": 0, "dustpan": 0}
 
 
 def make_env(task: str, variation: str | None = None) -> TabletopEnv:

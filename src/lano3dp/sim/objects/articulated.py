@@ -540,3 +540,116 @@ def add_plant(builder: SceneBuilder, name: str, position, yaw: float = 0.0, colo
                       np.array([radius + 2 * t, radius + 2 * t, soil + 0.13 * scale]))
     return builder.register(info)
 
+
+
+# ---------------------------------------------------------------------------------- broom, dustpan
+
+BROOM_HEAD_HALF = (0.015, 0.06, 0.01)  # along the handle, across it, up (m, scale 1)
+BROOM_HANDLE_LENGTH, BROOM_HANDLE_RADIUS = 0.22, 0.01
+BROOM_HEAD_MASS, BROOM_HANDLE_MASS = 0.03, 0.03
+DUSTPAN_DEPTH, DUSTPAN_WIDTH, DUSTPAN_WALL_HEIGHT = 0.12, 0.17, 0.03
+
+
+@dataclass(frozen=True)
+class BroomParts:
+    """A push broom lying on the table: a head box at its local origin, the handle along local -x.
+
+    Broom frame: origin at the head's centre (which is `head_half[2]` above the table when the
+    broom lies flat), +x = the direction the head pushes, z up.
+    """
+
+    name: str
+    head_half: tuple[float, float, float]
+    handle_length: float
+    handle_radius: float = BROOM_HANDLE_RADIUS
+
+    @classmethod
+    def of(cls, name: str, scale: float = 1.0) -> BroomParts:
+        # The head's height and the handle's radius keep their size: both lie flat on the table at
+        # every scale and the fingers close on the same 2 cm handle.
+        hx, hy, hz = BROOM_HEAD_HALF
+        return cls(name, (hx * scale, hy * scale, hz), BROOM_HANDLE_LENGTH * scale)
+
+    @property
+    def body(self) -> str:
+        return self.name
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.body,)
+
+    @property
+    def grasp_x(self) -> float:
+        """Local x of the centre of mass on the handle: holding it there puts no torque on the grip."""
+        handle_centre = -self.head_half[0] - self.handle_length / 2
+        return BROOM_HANDLE_MASS * handle_centre / (BROOM_HANDLE_MASS + BROOM_HEAD_MASS)
+
+
+def add_broom(builder: SceneBuilder, name: str, position, yaw: float = 0.0, color: str = "yellow",
+              scale: float = 1.0, role: str = "target", handle_color: str = "brown") -> ObjectInfo:
+    """A free push broom lying flat (60 g): head box with the handle along its local -x axis."""
+    p = BroomParts.of(name, scale)
+    hx, hy, hz = p.head_half
+    body = builder.world.add_body(name=p.body, pos=[float(position[0]), float(position[1]), hz + 0.0005],
+                                  quat=yaw_quat(yaw))
+    body.add_freejoint(name=f"{name}/free")
+    _box(body, f"{name}/head", [0, 0, 0], [hx, hy, hz], rgba(color), mass=BROOM_HEAD_MASS,
+         friction=[0.3, 0.01, 0.0005])
+    body.add_geom(name=f"{name}/handle", type=CAPSULE, size=[p.handle_radius, 0, 0], rgba=rgba(handle_color),
+                  fromto=[-hx - p.handle_radius, 0, 0, -hx - p.handle_length + p.handle_radius, 0, 0],
+                  mass=BROOM_HANDLE_MASS, friction=[1.2, 0.02, 0.0005])
+    length = hx + p.handle_length
+    info = ObjectInfo(name, "broom", color, size_word(scale), p.bodies, length / 2 + 0.02, np.array(body.pos), role,
+                      np.array([length, hy, hz]))
+    return builder.register(info)
+
+
+@dataclass(frozen=True)
+class DustpanParts:
+    """A static dustpan: a floor flush with the table, walls on three sides, open towards local -x.
+
+    Dustpan frame: origin on the table at the middle of the mouth (the open edge), +x into the pan.
+    """
+
+    name: str
+    depth: float
+    width: float
+    wall_height: float = DUSTPAN_WALL_HEIGHT
+    wall: float = 0.006
+
+    @classmethod
+    def of(cls, name: str, scale: float = 1.0) -> DustpanParts:
+        return cls(name, DUSTPAN_DEPTH * scale, DUSTPAN_WIDTH * scale)
+
+    @property
+    def body(self) -> str:
+        return self.name
+
+    @property
+    def bodies(self) -> tuple[str, ...]:
+        return (self.body,)
+
+    @property
+    def inner_half_width(self) -> float:
+        return self.width / 2 - self.wall
+
+
+def add_dustpan(builder: SceneBuilder, name: str, position, yaw: float = 0.0, color: str = "blue",
+                scale: float = 1.0, role: str = "target") -> ObjectInfo:
+    """A static dustpan whose mouth (the open side, at `position`) faces local -x.
+
+    The floor is a 1 mm visual-only plate (the table carries the dirt; RLBench's dustpan has a
+    thin sloped lip), so swept dirt slides in without a step.
+    """
+    p = DustpanParts.of(name, scale)
+    d, w, h, t = p.depth, p.width, p.wall_height, p.wall
+    colour = rgba(color)
+    body = builder.world.add_body(name=p.body, pos=[float(position[0]), float(position[1]), 0.0], quat=yaw_quat(yaw))
+    _box(body, f"{name}/floor", [d / 2, 0, 0.0005], [d / 2, w / 2 - t, 0.0005], _shade(colour, 1.3),
+         contype=0, conaffinity=0)  # visual only: the table under it carries the dirt
+    for i, s in enumerate((-1, 1)):
+        _box(body, f"{name}/side{i}", [d / 2, s * (w / 2 - t / 2), h / 2], [d / 2, t / 2, h / 2], colour)
+    _box(body, f"{name}/back", [d - t / 2, 0, h / 2], [t / 2, w / 2 - t, h / 2], colour)
+    info = ObjectInfo(name, "dustpan", color, size_word(scale), p.bodies, float(np.hypot(d, w)) / 2 + 0.01,
+                      np.array(body.pos), role, np.array([d, w / 2, h]))
+    return builder.register(info)

@@ -41,5 +41,6 @@ from lano3dp.sim.tasks import (  # noqa: E402,F401
     open_wine_bottle,
     phone_on_base,
     put_item_in_drawer,
+    sweep_to_dustpan,
     water_plants,
 )

@@ -162,17 +162,19 @@ def record_episode(env, observer, seed: int, config: CollectConfig) -> tuple[dic
     success = False
     for t in range(env.max_steps):
         frame = env.frame()
-        clouds = []
-        for k, phrase in enumerate(phrases):
-            try:
-                cloud = observer.observe(frame, [phrase]).points[0]
-            except PerceptionError:
-                if last_clouds[k] is None:
-                    return None, 0
-                cloud = last_clouds[k]
-                held += 1
-            last_clouds[k] = cloud
-            clouds.append(cloud)
+        try:
+            clouds = list(observer.observe(frame, phrases).points)
+        except PerceptionError:  # some slot is occluded: hold its last cloud
+            clouds = []
+            for k, phrase in enumerate(phrases):
+                try:
+                    clouds.append(observer.observe(frame, [phrase]).points[0])
+                except PerceptionError:
+                    if last_clouds[k] is None:
+                        return None, 0
+                    clouds.append(last_clouds[k])
+                    held += 1
+        last_clouds = clouds
         action = actions[min(t, len(actions) - 1)]
         rows["action"].append(action)
         rows["state"].append(obs["state"])

@@ -68,9 +68,11 @@ def _ring(body, name: str, radius: float, half_height: float, half_thickness: fl
                       rgba=color, mass=mass / count)
 
 
-def add_bowl(builder, name, position, yaw=0.0, color="blue", scale=1.0, role="target", free=True) -> ObjectInfo:
-    """An open bowl; wall k sits at angle `yaw + 2*pi*k/12` from the bowl's local x axis."""
-    radius, height, t = BOWL_RADIUS * scale, BOWL_HEIGHT * scale, BOWL_WALL_HALF_THICKNESS
+def add_bowl(builder, name, position, yaw=0.0, color="blue", scale=1.0, role="target", free=True,
+             height_scale=1.0) -> ObjectInfo:
+    """An open bowl; wall k sits at angle `yaw + 2*pi*k/12` from the bowl's local x axis.
+    `height_scale` makes it shallower or deeper than `scale` alone (a shape variant)."""
+    radius, height, t = BOWL_RADIUS * scale, BOWL_HEIGHT * scale * height_scale, BOWL_WALL_HALF_THICKNESS
     body = _body(builder, name, _position(position, 0.0), yaw_quat(yaw), free)
     colour = rgba(color)
     body.add_geom(name=f"{name}/base", type=CYLINDER, size=[radius + t, 0.004, 0], pos=[0, 0, 0.004],
@@ -99,12 +101,13 @@ def add_pan(builder, name, position, yaw=0.0, color="black", scale=1.0, role="ta
 
 
 def add_bottle(builder, name, position, yaw=0.0, color="green", scale=1.0, role="target", free=True,
-               quat=None) -> ObjectInfo:
+               quat=None, radius_scale=1.0) -> ObjectInfo:
     """A bottle: body cylinder + neck + cap along the local z axis, origin at the body's centre.
 
-    `quat` (w, x, y, z) overrides the upright yaw orientation, e.g. to lay the bottle down.
+    `quat` (w, x, y, z) overrides the upright yaw orientation, e.g. to lay the bottle down;
+    `radius_scale` makes the body slimmer or stouter than `scale` alone (a shape variant).
     """
-    r, half = BOTTLE_RADIUS * scale, BOTTLE_BODY_HALF * scale
+    r, half = BOTTLE_RADIUS * scale * radius_scale, BOTTLE_BODY_HALF * scale
     body = _body(builder, name, _position(position, half), list(quat) if quat is not None else yaw_quat(yaw), free)
     colour = rgba(color)
     body.add_geom(name=f"{name}/body", type=CYLINDER, size=[r, half, 0], rgba=colour, mass=0.15,
@@ -167,8 +170,9 @@ def add_ball(builder, name, position, yaw=0.0, color="purple", scale=1.0, role="
              radius=0.03, mass=0.05, friction=0.8, solref_damping=1.0) -> ObjectInfo:
     r = radius * scale
     body = _body(builder, name, _position(position, r), yaw_quat(yaw), free)
+    # condim 6 enables rolling friction, so a ball comes to rest instead of rolling for seconds.
     body.add_geom(name=f"{name}/ball", type=SPHERE, size=[r, 0, 0], rgba=rgba(color), mass=mass,
-                  friction=[friction, 0.005, 0.0002], solref=[0.02, solref_damping])
+                  friction=[friction, 0.005, 0.001], solref=[0.02, solref_damping], condim=6)
     info = ObjectInfo(name, "ball", color, size_word(scale), (name,), r + 0.005, np.array(body.pos), role,
                       np.array([r, r, r]))
     return builder.register(info)

@@ -2,7 +2,8 @@
 
 Layout: the bottle lies with its axis along world +y (neck towards +y) turned by a yaw in
 [-0.3, 0.3] rad (the paper keeps the orientation fixed; a little yaw keeps the expert honest),
-centre x in [0.38, 0.56], y in [-0.12, 0.12]. Instance variation: scale 0.8 / 1.2 and colour.
+centre x in [0.38, 0.56], y in [-0.12, 0.12]. Instance variation: scale 0.8 / 1.2, a slim (0.8x)
+or stout (1.15x) body, and colour.
 
 Expert: top-down grasp at the centre of mass with the fingers across the bottle, lift,
 rotate 90 degrees about the finger axis so the neck points up, lower until the bottom is
@@ -50,11 +51,14 @@ class BottleUpright(Task):
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)
         color = str(rng.choice(["red", "blue", "orange", "purple"])) if variation.has("instance") else "green"
+        radius_scale = float(rng.choice([0.8, 1.15])) if variation.has("instance") else 1.0  # slim / stout
         xy = rng.uniform([0.38, -0.12], [0.56, 0.12])
         yaw = float(rng.uniform(-0.3, 0.3))
         # The lying bottle's footprint: a disc at its centre plus one over each end (a disc around the
         # whole 19 cm bottle would wall off most of the table).
-        placement = Placement("bottle", np.array([*xy, BOTTLE_RADIUS * scale]), yaw, color, scale, 0.06 * scale)
+        radius = BOTTLE_RADIUS * scale * radius_scale
+        placement = Placement("bottle", np.array([*xy, radius]), yaw, color, scale, 0.06 * scale,
+                              {"radius_scale": radius_scale})
         axis = rot_z(yaw) @ np.array([0.0, 1.0, 0.0])
         keepout = [(xy + axis[:2] * 0.085 * scale, 0.05 * scale), (xy - axis[:2] * 0.06 * scale, 0.05 * scale)]
         layout = Layout(seed=0, objects={"bottle": placement}, keepout=keepout)
@@ -64,7 +68,8 @@ class BottleUpright(Task):
     def build(self, builder, layout: Layout) -> None:
         bottle = layout.objects["bottle"]
         primitives.add_bottle(builder, layout.names["bottle"], bottle.position, color=bottle.color,
-                              scale=bottle.scale, quat=lying_quat(bottle.yaw))
+                              scale=bottle.scale, quat=lying_quat(bottle.yaw),
+                              radius_scale=bottle.params.get("radius_scale", 1.0))
 
     def plan_expert(self, sim: SimState | None, layout: Layout) -> MotionPlan:
         bottle = layout.objects["bottle"]
@@ -79,10 +84,11 @@ class BottleUpright(Task):
         finger_axis = np.cross([0.0, 0.0, 1.0], axis)
         grasp_rotation = top_down(np.arctan2(finger_axis[0], -finger_axis[1]))
         grasp = centre + COM_OFFSET * scale * axis
-        grasp[2] = BOTTLE_RADIUS * scale
+        radius = BOTTLE_RADIUS * scale * bottle.params.get("radius_scale", 1.0)
+        grasp[2] = radius
         upright_rotation = rot_axis(finger_axis, -np.pi / 2) @ grasp_rotation
         bottom_below_tcp = (BOTTLE_BODY_HALF + COM_OFFSET) * scale
-        lift = np.array([*grasp[:2], bottom_below_tcp + BOTTLE_RADIUS * scale + 0.06])
+        lift = np.array([*grasp[:2], bottom_below_tcp + radius + 0.06])
         place = np.array([*grasp[:2], bottom_below_tcp + 0.005])
 
         plan = MotionPlan(HOME_POSITION, top_down())

@@ -3,15 +3,15 @@
 Layout: the bowl on the robot's left (y in [0.08, 0.22]), the pan on its right (y in
 [-0.25, -0.11]), x in [0.36, 0.56], centres at least 0.30 m apart; 3 items (spheres or
 cubes, 10 g) sit in the bowl's half that faces the pan. Instance variation: bowl and pan
-scaled 0.8 / 1.2 and recoloured.
+scaled 0.8 / 1.2 and recoloured, the bowl 0.8x shallower or 1.3x deeper.
 
 Expert: grasp the bowl wall on the side away from the pan (top-down, fingers straddling the
 wall, opened only part-way so the inner finger clears the items), lift to 0.22 m, carry the
 bowl until its far lip is over the pan, tilt it 150 degrees about the horizontal axis
 tangent to the grasped wall, hold, tilt back.
 
-Success: every item rests inside the pan (xy within the pan's inner radius, below its rim
-plus 2 cm, speed under 5 cm/s).
+Success: every item is inside the pan (xy within the pan's radius, below its rim, not rising
+faster than 5 cm/s) and none is still inside the bowl.
 """
 
 from __future__ import annotations
@@ -34,6 +34,11 @@ PREGRASP_GRIP = 0.7  # partly closed: ~2.6 cm between the fingers, enough for th
 ITEM_COLORS = ("yellow", "orange", "red", "green", "purple")
 
 
+def bowl_height(bowl: Placement) -> float:
+    """Wall height of the bowl placement, metres."""
+    return BOWL_HEIGHT * bowl.scale * bowl.params.get("height_scale", 1.0)
+
+
 @register_task
 class BowlPour(Task):
     name = "bowl_pour"
@@ -48,6 +53,7 @@ class BowlPour(Task):
         instance = variation.has("instance")
         bowl_scale, pan_scale = self.instance_scale(rng, variation), self.instance_scale(rng, variation)
         bowl_color = str(rng.choice(["white", "cyan", "pink"])) if instance else "blue"
+        bowl_depth = float(rng.choice([0.8, 1.3])) if instance else 1.0  # shape variant: shallow / deep
         pan_color = str(rng.choice(["grey", "brown", "red"])) if instance else "black"
         while True:
             bowl_xy = rng.uniform([0.36, 0.08], [0.56, 0.22])
@@ -58,7 +64,7 @@ class BowlPour(Task):
         pan_yaw = float(np.pi / 2 + rng.uniform(-0.4, 0.4))  # handle pointing away from the bowl
         objects = {
             "bowl": Placement("bowl", np.array([*bowl_xy, 0.0]), bowl_yaw, bowl_color, bowl_scale,
-                              primitives.FOOTPRINTS["bowl"] * bowl_scale),
+                              primitives.FOOTPRINTS["bowl"] * bowl_scale, {"height_scale": bowl_depth}),
             "pan": Placement("pan", np.array([*pan_xy, 0.0]), pan_yaw, pan_color, pan_scale,
                              primitives.FOOTPRINTS["pan"] * pan_scale),
         }
@@ -80,7 +86,8 @@ class BowlPour(Task):
 
     def build(self, builder, layout: Layout) -> None:
         bowl, pan = layout.objects["bowl"], layout.objects["pan"]
-        primitives.add_bowl(builder, layout.names["bowl"], bowl.position, bowl.yaw, bowl.color, bowl.scale)
+        primitives.add_bowl(builder, layout.names["bowl"], bowl.position, bowl.yaw, bowl.color, bowl.scale,
+                            height_scale=bowl.params.get("height_scale", 1.0))
         primitives.add_pan(builder, layout.names["pan"], pan.position, pan.yaw, pan.color, pan.scale)
         for key, item in layout.objects.items():
             if item.kind == "item":
@@ -96,7 +103,7 @@ class BowlPour(Task):
         step = 2 * np.pi / BOWL_WALLS
         wall_angle = bowl.yaw + step * np.round((desired - bowl.yaw) / step)
         u = np.array([np.cos(wall_angle), np.sin(wall_angle), 0.0])
-        radius, height = BOWL_RADIUS * bowl.scale, BOWL_HEIGHT * bowl.scale
+        radius, height = BOWL_RADIUS * bowl.scale, bowl_height(bowl)
         position = np.array([*(bowl_xy + radius * u[:2]), height - GRASP_DEPTH])
         # EE y (finger axis) along u: top_down(yaw)[:, 1] = (sin yaw, -cos yaw, 0).
         rotation = top_down(np.arctan2(u[0], -u[1]))
@@ -143,12 +150,13 @@ class BowlPour(Task):
             if item.kind != "item":
                 continue
             position = sim.body_position(key)
-            if np.linalg.norm(position[:2] - pan_xy) > inner or position[2] > PAN_WALL_HEIGHT + 0.02:
+            # Inside the walls and below the rim: it can no longer leave the pan by rolling.
+            if np.linalg.norm(position[:2] - pan_xy) > inner or position[2] > PAN_WALL_HEIGHT:
                 return False
             # Still inside the bowl (e.g. the bowl was dropped into the pan) does not count.
             local = bowl_rotation.T @ (position - bowl_position)
-            if np.linalg.norm(local[:2]) < BOWL_RADIUS * bowl.scale and -0.01 < local[2] < BOWL_HEIGHT * bowl.scale:
+            if np.linalg.norm(local[:2]) < BOWL_RADIUS * bowl.scale and -0.01 < local[2] < bowl_height(bowl):
                 return False
-            if np.linalg.norm(sim.body_velocity(key)[3:]) > 0.05:
+            if sim.body_velocity(key)[5] > 0.05:  # still bouncing up
                 return False
         return True

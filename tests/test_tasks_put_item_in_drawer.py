@@ -20,6 +20,7 @@ def env():
 
 
 def test_block_is_registered_with_the_slot_word(env):
+    """The oracle grounds "the block" by kind, so the cube must carry the slot word, not "cube"."""
     assert env.objects["block"].kind == "block"
     assert env.objects["block"].body_names == ("block",)
 

@@ -1,5 +1,6 @@
-"""Articulated and composite objects: drawer cabinet, hinged-door box (microwave), phone and
-phone base.
+"""Articulated and composite objects of the RLBench-style tasks: drawer cabinet, hinged-door box
+(microwave), phone and phone base, wine bottle with a cap, watering can, potted plant, push broom,
+dustpan, and the block of `put_item_in_drawer`.
 
 Builders follow the `primitives` signature
 
@@ -24,7 +25,7 @@ from typing import TYPE_CHECKING
 import mujoco
 import numpy as np
 
-from lano3dp.sim.objects import ObjectInfo, rgba, size_word
+from lano3dp.sim.objects import ObjectInfo, primitives, rgba, size_word
 
 if TYPE_CHECKING:
     from lano3dp.sim.scene import SceneBuilder
@@ -653,3 +654,24 @@ def add_dustpan(builder: SceneBuilder, name: str, position, yaw: float = 0.0, co
     info = ObjectInfo(name, "dustpan", color, size_word(scale), p.bodies, float(np.hypot(d, w)) / 2 + 0.01,
                       np.array(body.pos), role, np.array([d, w / 2, h]))
     return builder.register(info)
+
+
+# ------------------------------------------------------------------------------------------ block
+
+BLOCK_HALF, BLOCK_MASS = 0.02, 0.06  # m at scale 1, kg
+
+
+def add_block(builder: SceneBuilder, name: str, position, yaw: float = 0.0, color: str = "blue",
+              scale: float = 1.0, role: str = "target") -> ObjectInfo:
+    """A free 4 cm cube (60 g) of kind "block", the word the language layer uses for the item."""
+    info = primitives.add_cube(builder, name, position, yaw, color, scale, role=role, half_size=BLOCK_HALF,
+                               mass=BLOCK_MASS)
+    info.kind = "block"
+    return info
+
+
+# Kinds a variation may add as look-alikes ("similar") through `primitives.add_object`, which
+# dispatches on `primitives.BUILDERS`; registered here so the core's primitive list stays primitive.
+for _kind, _builder in {"block": add_block, "phone": add_phone, "watering can": add_watering_can,
+                        "broom": add_broom}.items():
+    primitives.BUILDERS.setdefault(_kind, _builder)

@@ -49,6 +49,7 @@ class PhoneOnBase(Task):
     object_slots = ("phone", "base")
     instruction = "put the {phone} on the {base}"
     max_steps = 130
+    similar_slots = ("phone",)
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)

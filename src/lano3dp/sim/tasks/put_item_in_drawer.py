@@ -2,7 +2,7 @@
 
 Layout: the drawer cabinet as in `open_drawer` (centre x in [0.36, 0.46], |y| in [0.04, 0.18],
 front towards +x, yaw in [-0.5, 0.5] rad) open by 85-100% of its travel; a 4 cm block
-(`primitives.add_cube`, 60 g, registered with kind "block") at a random yaw on the other side
+(`objects.articulated.add_block`, 60 g, kind "block") at a random yaw on the other side
 of the table (x in [0.28, 0.58], opposite sign of y, |y| in [0.10, 0.32]), 5 cm clear of the
 drawer's footprint and of the pulled-out drawer. Instance variation:
 block and drawer scaled 0.8 / 1.2 independently and recoloured.
@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from lano3dp.sim.experts import MotionPlan
-from lano3dp.sim.objects import primitives
+from lano3dp.sim.objects.articulated import BLOCK_HALF, add_block
 from lano3dp.sim.robot import HOME_POSITION, rot_z, top_down
 from lano3dp.sim.tasks import register_task
 from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
@@ -35,8 +35,6 @@ from lano3dp.sim.tasks.close_microwave import yaw_along
 from lano3dp.sim.tasks.open_drawer import build_drawer, close_gently, drawer_frame, sample_beside, sample_drawer
 from lano3dp.sim.variations import Variation
 
-BLOCK_HALF = 0.02  # m at scale 1
-BLOCK_MASS = 0.06  # kg
 BLOCK_COLORS = ("red", "yellow", "purple", "orange")
 GRASP_TCP_HEIGHT = 0.012  # TCP above the block's bottom at the grasp
 
@@ -65,9 +63,7 @@ class PutItemInDrawer(Task):
     def build(self, builder, layout: Layout) -> None:
         build_drawer(builder, layout)
         block = layout.objects["block"]
-        info = primitives.add_cube(builder, layout.names["block"], block.position, block.yaw, block.color, block.scale,
-                                   role="target", half_size=BLOCK_HALF, mass=BLOCK_MASS)
-        info.kind = "block"  # the slot word: "cube" would not match the policy's object name
+        add_block(builder, layout.names["block"], block.position, block.yaw, block.color, block.scale)
 
     def plan_expert(self, sim: SimState | None, layout: Layout) -> MotionPlan:
         parts, origin, rotation = drawer_frame(layout)

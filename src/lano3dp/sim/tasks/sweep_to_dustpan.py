@@ -57,6 +57,7 @@ class SweepToDustpan(Task):
     object_slots = ("broom", "dustpan")
     instruction = "sweep the dirt into the {dustpan} with the {broom}"
     max_steps = 150
+    similar_slots = ("broom",)
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         instance = variation.has("instance")

@@ -59,6 +59,7 @@ class WaterPlants(Task):
     object_slots = ("watering can", "plant")
     instruction = "water the {plant} with the {watering can}"
     max_steps = 150
+    similar_slots = ("watering can",)
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         instance = variation.has("instance")

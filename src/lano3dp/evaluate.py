@@ -35,9 +35,11 @@ from typing import Any
 
 import numpy as np
 
-from lano3dp.errors import Lano3dpError
-
 DEFAULT_EVAL_SEED = 1_000_000
+# Guidance defaults: A_0|k cost on every DDIM step (S = 100 training steps covers all 10), metric push of
+# 3 cm per guided step. The paper's setting (DDPM-100, S = 10, push in normalised units) stays available.
+DEFAULT_RHO = 0.03
+DEFAULT_LAST_STEPS = 100
 SUMMARY_FIELDS = ("episodes", "success_rate", "collision_rate", "safe_success_rate", "error_rate",
                   "mean_min_clearance", "mean_path_length", "mean_steps", "latency_mean_s", "latency_p95_s")
 
@@ -55,6 +57,8 @@ class EvalConfig:
         obstacles: phrases of the objects to avoid; None = every object the scene marks as an obstacle.
         guidance: "none", "noisy" (cost on A_k) or "clean" (the paper's A_0|k).
         rho, last_steps, per_train_step: the guidance scale, S, and whether rho is scaled by the scheduler stride.
+        metric_gradient: push isotropically in metres (rho = metres per guided step; `guidance.MetricGradient`);
+            False is the paper's push, in the normaliser's units (rho then needs to be far larger).
         scheduler, steps: inference scheduler and its number of denoising steps (None: the policy's default).
         checked: checked execution (re-sample with a larger rho while the executed part collides).
         margin, held_radius: obstacle model; held_radius None measures it from the held object's cloud.
@@ -73,9 +77,10 @@ class EvalConfig:
     seed: int = DEFAULT_EVAL_SEED
     obstacles: list[str] | None = None
     guidance: str = "none"
-    rho: float = 0.5
-    last_steps: int = 10
-    per_train_step: bool = True
+    rho: float = DEFAULT_RHO
+    last_steps: int = DEFAULT_LAST_STEPS
+    per_train_step: bool = False
+    metric_gradient: bool = True
     scheduler: str | None = None
     steps: int | None = None
     checked: bool = False
@@ -149,7 +154,8 @@ def runtime_config(config: EvalConfig, seed: int):
         guidance=guidance_config(config), scheduler=config.scheduler, num_inference_steps=config.steps,
         n_action_steps=config.n_action_steps,
         obstacle=ObstacleModel(margin=config.margin, held_radius=config.held_radius),
-        checked=CheckConfig(initial_scale=max(config.rho, 1e-3)) if config.checked else None, seed=seed)
+        checked=CheckConfig(initial_scale=max(config.rho, 1e-3)) if config.checked else None,
+        metric_gradient=config.metric_gradient, seed=seed)
 
 
 # ---- one process: policy + env + episodes ---------------------------------------------------------
@@ -365,7 +371,7 @@ class RunConfig:
         registry: a skill registry JSON (SkillRegistry.to_json) naming a checkpoint per skill.
         task: simulator task (default: the plan's skill, whose registry name is the task name).
         variation: scene variation (default: "obstacle" when the plan names obstacles, else "clean").
-        guidance, rho, last_steps, per_train_step, scheduler, steps, checked, margin: as EvalConfig.
+        guidance, rho, last_steps, per_train_step, metric_gradient, scheduler, steps, checked, margin: as EvalConfig.
         compare: also run the same scene without guidance, for the plot.
         seed: scene seed.
         out: folder for run.json, video.mp4 and top_view.png.
@@ -377,9 +383,10 @@ class RunConfig:
     task: str | None = None
     variation: str | None = None
     guidance: str = "clean"
-    rho: float = 0.5
-    last_steps: int = 10
-    per_train_step: bool = True
+    rho: float = DEFAULT_RHO
+    last_steps: int = DEFAULT_LAST_STEPS
+    per_train_step: bool = False
+    metric_gradient: bool = True
     scheduler: str | None = None
     steps: int | None = None
     checked: bool = False
@@ -467,7 +474,8 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
     for label, mode in conditions:
         eval_config = EvalConfig(checkpoint=str(checkpoint), guidance=mode, rho=config.rho,
                                  last_steps=config.last_steps, per_train_step=config.per_train_step,
-                                 scheduler=config.scheduler, steps=config.steps, checked=config.checked,
+                                 metric_gradient=config.metric_gradient, scheduler=config.scheduler, steps=config.steps,
+                                 checked=config.checked,
                                  margin=config.margin)
         runner = PolicyRunner(policy, observer, runtime_config(eval_config, config.seed), target_phrases=targets,
                               obstacle_phrases=obstacles)
@@ -487,13 +495,7 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
             f"mean latency {1000 * np.mean(result.chunk_latency_s or [0]):.0f} ms"
             + (f" ({result.error})" if result.error else ""))
     first = episodes[conditions[0][0]]
-    objects = {}
-    for phrase in targets or []:
-        try:
-            objects[phrase] = observer.observe(frame, [phrase]).points[0].mean(0)[:2]
-        except Lano3dpError:
-            pass
-    plot = plot_top_view(out / "top_view.png", paths, obstacles=first["obstacles"], objects=objects,
+    plot = plot_top_view(out / "top_view.png", paths, obstacles=first["obstacles"], objects=first["targets"],
                          title=f"'{config.instruction}'")
     result = {"command": command or shlex.join(["lano3dp", *sys.argv[1:]]), "config": asdict(config),
               "plan": plan.model_dump(),

@@ -267,6 +267,7 @@ class PolicyRunner:
         self.step_count = 0
         self.held_clouds = 0  # frames in which a hidden target kept its previous cloud
         self._last_clouds: np.ndarray | None = None
+        self.initial_targets: dict[str, list[float]] = {}  # phrase -> centroid (m) in the first frame
         self.stopped_reason: str | None = None
         self.generator = torch.Generator().manual_seed(self.config.seed)
 
@@ -282,6 +283,7 @@ class PolicyRunner:
         self.step_count = 0
         self.held_clouds = 0
         self._last_clouds = None
+        self.initial_targets = {}
         self.stopped_reason = None
         self.generator = torch.Generator().manual_seed(self.config.seed if seed is None else int(seed))
 
@@ -339,6 +341,9 @@ class PolicyRunner:
                     clouds.append(self._last_clouds[slot])
                     self.held_clouds += 1
             clouds = np.stack(clouds)
+        if self._last_clouds is None:
+            self.initial_targets = {phrase: clouds[k].mean(0).round(4).tolist()
+                                    for k, phrase in enumerate(self.target_phrases)}
         self._last_clouds = clouds
         return clouds
 
@@ -469,6 +474,7 @@ class EpisodeResult:
         obstacles: the fitted obstacle shapes the runner guided against (see `describe_obstacle`).
         held_radius: m, the held extent used in Q*.
         held_clouds: target clouds carried over from the previous frame because the target was hidden.
+        targets: phrase -> centroid (m) of each target's cloud in the first frame (object policies).
         error: why the episode ended early (perception failure, no clear chunk), or None.
         wall_s: wall time of the episode, seconds.
     """
@@ -487,6 +493,7 @@ class EpisodeResult:
     obstacles: list[dict[str, Any]] = field(default_factory=list)
     held_radius: float | None = None
     held_clouds: int = 0
+    targets: dict[str, list[float]] = field(default_factory=dict)
     error: str | None = None
     wall_s: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
@@ -594,6 +601,7 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
                                    for c in runner.chunks],
         ee_path=ee_path,
         obstacles=[describe_obstacle(o) for o in runner.obstacles] if runner.obstacles is not None else [],
-        held_radius=runner.held_radius, held_clouds=runner.held_clouds, error=error,
+        held_radius=runner.held_radius, held_clouds=runner.held_clouds,
+        targets=dict(runner.initial_targets), error=error,
         wall_s=time.perf_counter() - started,
     )

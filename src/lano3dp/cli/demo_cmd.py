@@ -17,6 +17,8 @@ from pathlib import Path
 
 import typer
 
+from lano3dp.evaluate import DEFAULT_LAST_STEPS, DEFAULT_RHO
+
 
 def register(app: typer.Typer) -> None:
     app.command("demo")(demo_command)
@@ -30,8 +32,8 @@ def demo_command(
     minutes: float = typer.Option(6.0, help="Training budget in minutes (the step count is measured from it)."),
     steps: int = typer.Option(None, help="Train exactly this many steps instead of a time budget."),
     episodes: int = typer.Option(10, min=1, help="Evaluation episodes per condition."),
-    rho: float = typer.Option(0.5, help="Guidance scale rho."),
-    last_steps: int = typer.Option(10, help="Guide the last S training-scale denoising steps."),
+    rho: float = typer.Option(DEFAULT_RHO, help="Guidance scale rho (metres per guided step: isotropic push)."),
+    last_steps: int = typer.Option(DEFAULT_LAST_STEPS, help="Guide while the training-scale step k <= S (100: all)."),
     workers: int = typer.Option(2, min=1, help="Parallel evaluation processes."),
     seed: int = typer.Option(0, help="Seed of the collection and training."),
 ) -> None:
@@ -159,7 +161,7 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
              pick[0]["ee_path"]),
             ("guidance A_0|k: " + ("collided" if pick[1]["collided"] else "no contact"), pick[1]["ee_path"])]
     plot_top_view(out / "top_view.png", runs, obstacles=pick[1]["obstacles"] or pick[0]["obstacles"],
-                  title=f"{task}, novel obstacle: executed EE path, top view")
+                  objects=pick[0].get("targets") or {}, title=f"{task}, novel obstacle: executed EE path, top view")
     videos = [e.get("video") for r in results.values() for e in r["episodes"] if e.get("video")]
 
     timing_rows = [[k.removesuffix("_s").replace("_", " "), f"{v:.0f} s"] for k, v in timings.items()]
@@ -171,9 +173,9 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         "A small Lan-o3dp policy (object clouds of the task's objects + robot state -> diffusion over EE actions) "
         f"trained on **{store.n_episodes} scripted demonstrations** of clean scenes, then run in closed loop on new "
         "scenes: clean ones, and ones with a **novel obstacle** on the expert's path (never seen in training), "
-        f"without and with the paper's cost guidance on A_0|k (rho = {rho:g}, last S = {last_steps} steps; the "
-        "obstacle is segmented, fitted with a vertical cylinder, and Q* = its radius + the held object's extent "
-        "+ 2 cm).",
+        f"without and with the paper's cost guidance on A_0|k (rho = {rho:g} m per guided step with the isotropic "
+        f"metric push, S = {last_steps}; the obstacle is segmented, fitted with a vertical cylinder, and Q* = its "
+        "radius + the held object's extent + 2 cm).",
         "",
         f"Policy: {parameters / 1e6:.2f} M parameters, UNet {tuple(policy.config.down_dims)}, "
         f"{policy.config.n_points} points per object, obs {policy.config.n_obs_steps} steps, horizon "

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import typer
 
+from lano3dp.evaluate import DEFAULT_LAST_STEPS, DEFAULT_RHO
+
 
 def register(app: typer.Typer) -> None:
     app.command("eval")(eval_command)
@@ -22,9 +24,12 @@ def eval_command(
     obstacles: list[str] = typer.Option(None, "--obstacles", help="Object to avoid (repeatable). Default: every "
                                                                   "object the scene marks as an obstacle."),
     guidance: str = typer.Option("none", help="none | noisy (cost on A_k) | clean (the paper's A_0|k)."),
-    rho: float = typer.Option(0.5, help="Guidance scale rho."),
-    last_steps: int = typer.Option(10, help="Guide only the last S training-scale denoising steps."),
-    per_train_step: bool = typer.Option(True, help="Scale rho by the scheduler stride (DDIM pushes as much as DDPM)."),
+    rho: float = typer.Option(DEFAULT_RHO, help="Guidance scale rho (metres per guided step with --metric-push)."),
+    last_steps: int = typer.Option(DEFAULT_LAST_STEPS, help="Guide while the training-scale step k <= S (100: all)."),
+    metric_push: bool = typer.Option(True, "--metric-push/--paper-push",
+                                     help="Push isotropically in metres, or as the paper in normalised action units "
+                                          "(which needs a far larger rho)."),
+    per_train_step: bool = typer.Option(False, help="Scale rho by the scheduler stride (DDIM pushes as much as DDPM)."),
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, help="Denoising steps (default: the policy's)."),
     checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
@@ -46,7 +51,8 @@ def eval_command(
     config = EvalConfig(
         checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
         obstacles=list(obstacles) if obstacles else None, guidance=guidance, rho=rho, last_steps=last_steps,
-        per_train_step=per_train_step, scheduler=scheduler, steps=steps, checked=checked, margin=margin,
+        per_train_step=per_train_step, metric_gradient=metric_push, scheduler=scheduler, steps=steps,
+        checked=checked, margin=margin,
         held_radius=held_radius, max_steps=max_steps, workers=workers,
         video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out))
     console = Console(stderr=True)

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import typer
 
+from lano3dp.evaluate import DEFAULT_LAST_STEPS, DEFAULT_RHO
+
 
 def register(app: typer.Typer) -> None:
     app.command("run")(run_command)
@@ -19,8 +21,11 @@ def run_command(
     task: str = typer.Option(None, help="Simulator task (default: the plan's skill)."),
     variation: str = typer.Option(None, help="Scene variation (default: obstacle if the plan names obstacles)."),
     guidance: str = typer.Option("clean", help="none | noisy | clean (the paper's A_0|k guidance)."),
-    rho: float = typer.Option(0.5, help="Guidance scale rho."),
-    last_steps: int = typer.Option(10, help="Guide the last S training-scale denoising steps."),
+    rho: float = typer.Option(DEFAULT_RHO, help="Guidance scale rho (metres per guided step with --metric-push)."),
+    last_steps: int = typer.Option(DEFAULT_LAST_STEPS, help="Guide while the training-scale step k <= S (100: all)."),
+    metric_push: bool = typer.Option(True, "--metric-push/--paper-push",
+                                     help="Push isotropically in metres, or as the paper in normalised action units "
+                                          "(which needs a far larger rho)."),
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, help="Denoising steps (default: the policy's)."),
     checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
@@ -39,7 +44,8 @@ def run_command(
     console = Console()
     config = RunConfig(instruction=instruction, checkpoint=str(checkpoint) if checkpoint else None,
                        registry=str(registry) if registry else None, task=task, variation=variation,
-                       guidance=guidance, rho=rho, last_steps=last_steps, scheduler=scheduler, steps=steps,
+                       guidance=guidance, rho=rho, last_steps=last_steps, metric_gradient=metric_push,
+                       scheduler=scheduler, steps=steps,
                        checked=checked, compare=compare, max_steps=max_steps, seed=seed, out=str(out))
     try:
         result = run_instruction(config, log=console.print, command=command_line(ctx))

@@ -101,17 +101,20 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
     Give either `steps`, or `minutes` (a wall-clock budget for the optimisation itself: the step count is
     probed once, see `time_training_step`). An existing run keeps the step count it was started with.
     """
-    from lano3dp.policy.checkpoint import list_checkpoints
+    from lano3dp.policy.checkpoint import checkpoint_name, list_checkpoints
     from lano3dp.train import TrainConfig, policy_config_for_dataset, train
 
     run = Path(run)
     saved = run / "train_config.json"
     if saved.exists():
         config = TrainConfig.from_dict(json.loads(saved.read_text()))
+        if steps is not None and steps != config.steps:
+            raise ValueError(f"{run} was started for {config.steps} steps, not {steps}; use another folder "
+                             "(or the same step count to resume)")
         done = max((step for step, _ in list_checkpoints(run / "checkpoints")), default=0)
         if done >= config.steps:
             log(f"train: {run} is complete ({config.steps} steps); skipping")
-            return run / "checkpoints" / f"step_{config.steps:07d}"
+            return run / "checkpoints" / checkpoint_name(config.steps)
         log(f"train: resuming {run} at step {done} of {config.steps}")
     else:
         policy_config = policy_config or policy_config_for_dataset(data)

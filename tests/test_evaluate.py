@@ -1,0 +1,91 @@
+"""Aggregation, reporting and resumability of evaluations (no simulator, no policy)."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+
+import numpy as np
+import pytest
+
+from lano3dp.evaluate import EvalConfig, guidance_config, runtime_config, summarize, write_json
+from lano3dp.pipeline import eval_stage
+from lano3dp.report import markdown_table, plot_rates, plot_top_view, wilson_interval
+
+
+def episode(success: bool, collided: bool, clearance: float | None, path: float, latencies, error=None) -> dict:
+    return {"success": success, "collided": collided, "min_clearance": clearance, "path_length": path,
+            "steps": 100, "chunk_latency_s": list(latencies), "chunk_tries": [1] * len(latencies), "error": error}
+
+
+def test_summary_rates_and_means():
+    episodes = [
+        episode(True, False, 0.05, 1.0, [0.1, 0.1]),
+        episode(True, True, -0.01, 1.2, [0.2]),
+        episode(False, False, None, 0.8, [0.3], error="ObjectNotFoundError: object 'pan' was not found"),
+        episode(False, True, 0.0, 1.0, []),
+    ]
+    summary = summarize(episodes)
+    assert summary["episodes"] == 4 and summary["successes"] == 2
+    assert summary["success_rate"] == 0.5
+    assert summary["collision_rate"] == 0.5
+    assert summary["safe_success_rate"] == 0.25  # only the first one succeeded without touching
+    assert summary["error_rate"] == 0.25 and summary["errors"] == ["ObjectNotFoundError"]
+    # clearance is averaged over the episodes that measured one (3 of 4)
+    assert summary["mean_min_clearance"] == pytest.approx((0.05 - 0.01 + 0.0) / 3, abs=1e-5)
+    assert summary["worst_min_clearance"] == -0.01
+    assert summary["mean_path_length"] == pytest.approx(1.0)
+    assert summary["chunks"] == 4 and summary["latency_mean_s"] == pytest.approx(0.175)
+
+
+def test_wilson_interval():
+    low, high = wilson_interval(0, 10)
+    assert low == 0.0 and high == pytest.approx(0.2775, abs=1e-3)
+    low, high = wilson_interval(10, 10)
+    assert high == 1.0 and low == pytest.approx(0.7225, abs=1e-3)
+    low, high = wilson_interval(5, 10)
+    assert low == pytest.approx(0.2366, abs=1e-3) and high == pytest.approx(0.7634, abs=1e-3)
+    assert wilson_interval(0, 0) == (None, None)
+
+
+def test_markdown_table():
+    table = markdown_table(["a", "b"], [[1, None], [0.12345, "x|y"]])
+    assert table.splitlines() == ["| a | b |", "|---|---|", "| 1 | – |", "| 0.123 | x\\|y |"]
+
+
+def test_eval_config_to_guidance_and_runtime():
+    assert guidance_config(EvalConfig(checkpoint="c")) is None
+    config = EvalConfig(checkpoint="c", guidance="clean", rho=0.02, last_steps=100, checked=True, margin=0.03)
+    guidance = guidance_config(config)
+    assert guidance.mode == "clean" and guidance.scale == 0.02 and guidance.last_steps == 100
+    runtime = runtime_config(config, seed=7)
+    assert runtime.seed == 7 and runtime.metric_gradient and runtime.checked is not None
+    assert runtime.obstacle.margin == 0.03 and runtime.guided
+    with pytest.raises(ValueError, match="guidance"):
+        EvalConfig(checkpoint="c", guidance="sometimes")
+
+
+def test_eval_stage_reuses_results_made_with_the_same_config(tmp_path):
+    out = tmp_path / "eval.json"
+    config = EvalConfig(checkpoint=str(tmp_path / "no_such_checkpoint"), episodes=3, out=str(out))
+    write_json(out, {"config": asdict(config), "summary": {"success_rate": 0.5}})
+    assert eval_stage(config)["summary"]["success_rate"] == 0.5  # not re-run (the checkpoint does not exist)
+    changed = EvalConfig(checkpoint=config.checkpoint, episodes=4, out=str(out))
+    with pytest.raises(FileNotFoundError, match="no policy checkpoint"):
+        eval_stage(changed)  # a different config is evaluated anew
+
+
+def test_write_json_is_atomic_and_handles_numpy_and_infinity(tmp_path):
+    path = write_json(tmp_path / "a" / "r.json", {"x": np.float32(1.5), "y": np.arange(2), "z": float("inf")})
+    assert json.loads(path.read_text()) == {"x": 1.5, "y": [0, 1], "z": None}
+    assert not list(tmp_path.glob("a/*.tmp"))
+
+
+def test_plots_are_written(tmp_path):
+    path = np.array([[0.3, -0.2, 0.2], [0.4, 0.0, 0.2], [0.5, 0.2, 0.2]])
+    obstacle = {"shape": "Cylinder", "center": [0.4, 0.0], "radius": 0.03, "safety_distance": 0.12}
+    top = plot_top_view(tmp_path / "top.png", [("run", path)], obstacles=[obstacle], objects={"pan": [0.5, 0.2]})
+    rates = plot_rates(tmp_path / "rates.png", [("a", {"success_rate": 0.5, "collision_rate": 0.1,
+                                                       "safe_success_rate": 0.4})])
+    for png in (top, rates):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000

@@ -97,3 +97,20 @@ def test_frame_carries_ground_truth_instances(env):
     bowl_pixels = np.isin(frame.segmentation, frame.instance_names["bowl"]).sum()
     assert bowl_pixels > 20
     assert frame.depth[frame.segmentation >= 0].min() > 0.3  # metres from the camera
+
+
+def test_extreme_random_actions_among_obstacles_never_crash():
+    environment = TabletopEnv("bottle_upright", variation="obstacle+clutter", image_size=32, render_rgb=False)
+    rng = np.random.default_rng(1)
+    environment.action_space.seed(8)
+    try:
+        environment.reset(seed=0)
+        for t in range(60):
+            action = environment.action_space.sample() if t % 2 else rng.uniform(-3, 3, size=10)
+            obs, _, _, _, info = environment.step(action)
+            assert np.all(np.isfinite(obs["state"]))
+            assert np.isfinite(info["min_obstacle_clearance"])
+            if info["min_obstacle_clearance"] < 0:  # penetration is always reported as a contact event
+                assert info["n_obstacle_contacts"] > 0
+    finally:
+        environment.close()

@@ -19,8 +19,10 @@ an `RGBDFrame` with `instance_names` and `instance_attributes` for the ground-tr
 
 Info: "success", "is_success", "action_clipped", "obstacle_contacts" (contact events of the
 gripper or held object with obstacles during this step: dicts with obstacle, body, depth),
-"n_obstacle_contacts" (episode total), "min_obstacle_clearance" (metres, min over the step's
-checks; inf without obstacles), "held_object", "seed", "instruction", "target_phrases".
+"n_obstacle_contacts" (episode total), "min_obstacle_clearance" (metres at the end of the step;
+inf without obstacles; negative = penetration: the hand follows its target through a stiff
+weld, so a target inside an obstacle pushes the hand centimetres into it), "held_object",
+"seed", "variation", "instruction", "target_phrases", "slot_objects" (slot -> scene object name).
 Reward: 1.0 on success, else 0.0; `terminated` on success, `truncated` at `max_steps`.
 """
 

@@ -10,8 +10,8 @@ wall, opened only part-way so the inner finger clears the items), lift to 0.22 m
 bowl until its far lip is over the pan, tilt it 150 degrees about the horizontal axis
 tangent to the grasped wall, hold, tilt back.
 
-Success: every item is inside the pan (xy within the pan's radius, below its rim, not rising
-faster than 5 cm/s) and none is still inside the bowl.
+Success: every item is inside the pan (xy within the pan's radius, at most 2 cm above its rim
+as items may stack, not rising faster than 5 cm/s) and none is still inside the bowl.
 """
 
 from __future__ import annotations
@@ -150,8 +150,8 @@ class BowlPour(Task):
             if item.kind != "item":
                 continue
             position = sim.body_position(key)
-            # Inside the walls and below the rim: it can no longer leave the pan by rolling.
-            if np.linalg.norm(position[:2] - pan_xy) > inner or position[2] > PAN_WALL_HEIGHT:
+            # Inside the walls and at most one item height above the rim (items may stack).
+            if np.linalg.norm(position[:2] - pan_xy) > inner or position[2] > PAN_WALL_HEIGHT + 0.02:
                 return False
             # Still inside the bowl (e.g. the bowl was dropped into the pan) does not count.
             local = bowl_rotation.T @ (position - bowl_position)

@@ -73,3 +73,23 @@ def test_eval_cli_writes_results_with_the_documented_fields(trained):
     assert episode["collided"] == (episode["n_collision_steps"] > 0)
     assert all(c is not None for c in episode["chunk_predicted_clearance"])
     assert (root / "videos" / "episode_1000000.mp4").stat().st_size > 1000
+
+
+def test_run_cli_plans_acts_and_writes_video_and_top_view(trained):
+    root, _ = trained
+    out = root / "run_out"
+    result = CliRunner().invoke(app, [
+        "run", "pour the bowl into the pan and keep clear of the mug", "--checkpoint", str(root / "run"),
+        "--max-steps", "16", "--compare", "--out", str(out)])
+    assert result.exit_code == 0, result.output + repr(result.exception)
+    assert "plan: bowl_pour(bowl, pan); avoid mug" in result.output
+    record = json.loads((out / "run.json").read_text())
+    assert record["plan"]["skill"] == "bowl_pour" and record["variation"] == "obstacle"
+    # the simulator has no mug: its obstacle stands in, and the user is told so
+    assert record["obstacles"] == ["obstacle_0"] and "'mug' not in the simulated scene" in record["notes"][0]
+    assert set(record["episodes"]) == {"guided", "unguided"}
+    for name, episode in record["episodes"].items():
+        assert episode["steps"] == 16 or episode["success"], name
+        assert (out / f"video_{name}.mp4").stat().st_size > 1000
+        assert set(episode["targets"]) == {"bowl", "pan"}
+    assert (out / "top_view.png").read_bytes()[:4] == b"\x89PNG"

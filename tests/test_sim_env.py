@@ -114,3 +114,15 @@ def test_extreme_random_actions_among_obstacles_never_crash():
                 assert info["n_obstacle_contacts"] > 0
     finally:
         environment.close()
+
+
+def test_the_simulator_does_not_import_torch():
+    """Layering: sim never imports torch (it would also add seconds to every collect/eval worker start)."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from lano3dp.sim import TabletopEnv; env = TabletopEnv('bottle_upright', image_size=16); "
+            "env.reset(seed=0); env.step(env.expert_plan().actions()[0]); env.close(); "
+            "print('torch' in sys.modules)")
+    output = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, check=True)
+    assert output.stdout.strip() == "False"

@@ -199,7 +199,7 @@ def add_drawer(builder: SceneBuilder, name: str, position, yaw: float = 0.0, col
 
 # ---------------------------------------------------------------------------------------- microwave
 
-MICROWAVE_DEPTH, MICROWAVE_WIDTH, MICROWAVE_HEIGHT = 0.18, 0.26, 0.15
+MICROWAVE_DEPTH, MICROWAVE_WIDTH, MICROWAVE_HEIGHT = 0.16, 0.22, 0.14
 DOOR_THICKNESS, DOOR_MAX_ANGLE = 0.012, 2.0
 
 

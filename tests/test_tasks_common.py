@@ -157,3 +157,19 @@ def set_joint(env: TabletopEnv, joint: str, value: float) -> None:
     env.data.qpos[env.model.joint(joint).qposadr[0]] = value
     env.data.qvel[env.model.joint(joint).dofadr[0]] = 0.0
     mujoco.mj_forward(env.model, env.data)
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_obstacle_variation_finds_room_on_the_expert_path_in_most_layouts(task):
+    """Obstacles must stand on the expert's path yet clear of every object; a layout that leaves no
+    such spot silently drops the obstacle, so most layouts must leave one."""
+    from lano3dp.sim.variations import sample_extras
+
+    t, variation = make_task(task), Variation.parse("obstacle")
+    placed = 0
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        layout = t.sample_layout(rng, variation)
+        extras = sample_extras(t, layout, rng, variation)
+        placed += any(extra.role == "obstacle" for extra in extras.objects)
+    assert placed >= 14, f"{task}: an obstacle found room in only {placed}/20 layouts"

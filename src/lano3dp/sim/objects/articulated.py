@@ -6,7 +6,7 @@ Builders follow the `primitives` signature
 
     add_<kind>(builder, name, position, yaw=0.0, color=..., scale=1.0, role="target") -> ObjectInfo
 
-and the naming rule of `lano3dp.sim.objects`: every body of object `name` is `name/<part>`.
+and the naming rule of `lano3dp.sim.objects`: every body of object `name` is `name` or `name/<part>`.
 The joints, sites and dimensions a task needs are fixed by the object's name and scale, so a
 task recovers them after compiling with `DrawerParts.of(name, scale)` (and the like) instead of
 carrying builder state around. Sites sit in `SITE_GROUP` (the renderer hides them); experts and

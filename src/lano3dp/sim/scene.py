@@ -69,8 +69,8 @@ class CameraPose:
 
 # The training camera and the shifted camera used only at test time ("camera" variation):
 # rotated ~30 degrees about the vertical axis through the workspace centre and raised 10 cm.
-FRONT_CAMERA = CameraPose("front", position=(1.18, 0.0, 0.70), target=(0.42, 0.0, 0.08), fovy=45.0)
-SHIFTED_CAMERA = CameraPose("front", position=(1.08, 0.42, 0.80), target=(0.42, 0.0, 0.08), fovy=45.0)
+FRONT_CAMERA = CameraPose("front", position=(1.0, 0.0, 0.72), target=(0.42, 0.0, 0.10), fovy=45.0)
+SHIFTED_CAMERA = CameraPose("front", position=(0.93, 0.35, 0.80), target=(0.42, 0.0, 0.10), fovy=45.0)
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,7 @@ VARIATION_AXES = ("clutter", "similar", "instance", "camera", "background", "obs
 DISTRACTOR_KINDS = ("mug", "cube", "plate", "can", "ball", "bowl", "bottle")
 # Where loose objects may be placed (x, y), metres, world frame; all of it is in the front camera's view.
 PLACEMENT_LOW = np.array([0.22, -0.36])
-PLACEMENT_HIGH = np.array([0.70, 0.36])
+PLACEMENT_HIGH = np.array([0.64, 0.36])
 
 
 class VariationError(Lano3dpError, ValueError):

@@ -91,8 +91,17 @@ def draw_obstacles(ax, obstacles) -> None:
             ax.scatter(points[:, 0], points[:, 1], s=2, c="tab:red", alpha=0.5)
 
 
-def _view_limits(arrays: Sequence[np.ndarray], obstacles, pad: float = 0.05) -> tuple[tuple, tuple]:
-    xy = [a.reshape(-1, 3)[:, :2] for a in arrays]
+def _view_limits(arrays: Sequence[np.ndarray], obstacles, pad: float = 0.05,
+                 quantile: float = 0.0) -> tuple[tuple, tuple]:
+    """A square x-y view around the obstacles and the waypoints (all of them, or those within the
+    [quantile, 1 - quantile] range per axis, so that one runaway sample does not shrink the rest)."""
+    xy = []
+    for a in arrays:
+        points = a.reshape(-1, 3)[:, :2]
+        if quantile > 0:
+            low, high = np.quantile(points, [quantile, 1 - quantile], axis=0)
+            points = np.array([low, high])
+        xy.append(points)
     for obstacle in _obstacle_list(obstacles):
         base = getattr(obstacle, "cost", obstacle)
         if isinstance(base, (Cylinder, Sphere)):
@@ -146,32 +155,43 @@ def plot_denoising(steps: Sequence[RecordedStep], obstacles, path: str | Path, *
     return path
 
 
-def plot_trajectories_by_scale(trajectories: Mapping[float, np.ndarray], obstacles, path: str | Path, *,
+def plot_trajectories_by_scale(trajectories: Mapping[float | str, np.ndarray], obstacles, path: str | Path, *,
                                cost: PositionCost | None = None, title: str = "") -> Path:
-    """Fig. 6: final trajectories (B, H, 3) for each rho, x-y top view; colliding waypoints in red.
+    """Fig. 6: final trajectories (B, H, 3) for each rho, x-y top view; waypoints inside an obstacle in red.
 
     Args:
-        trajectories: rho -> (B, H, 3) metric positions.
-        cost: what decides "colliding" (clearance < 0); default the obstacles themselves.
+        trajectories: rho (or a label) -> (B, H, 3) metric positions.
+        cost: what decides that a trajectory collides (drawn as a red line); default the obstacles at the
+            waypoints; pass e.g. Densified(obstacle, 8) to count segments too.
     """
     plt = _pyplot()
     if not trajectories:
         raise ValueError("no trajectories to plot")
-    cost = cost or (ObstacleSet(_obstacle_list(obstacles)) if _obstacle_list(obstacles) else None)
-    xlim, ylim = _view_limits(list(trajectories.values()), obstacles)
+    listed = _obstacle_list(obstacles)
+    waypoint_cost = ObstacleSet(listed) if listed else None
+    cost = cost or waypoint_cost
+    xlim, ylim = _view_limits(list(trajectories.values()), obstacles, quantile=0.01)
     fig, axes = plt.subplots(1, len(trajectories), figsize=(3.0 * len(trajectories), 3.4), squeeze=False)
     for ax, (scale, batch) in zip(axes[0], trajectories.items(), strict=True):
         draw_obstacles(ax, obstacles)
         batch = np.asarray(batch)
-        colliding = np.zeros(batch.shape[:2], dtype=bool)
+        positions = torch.as_tensor(batch, dtype=torch.float64)
+        hits = np.zeros(batch.shape[:2], dtype=bool)  # waypoints inside
+        colliding = np.zeros(len(batch), dtype=bool)  # trajectories that collide anywhere `cost` looks
+        if waypoint_cost is not None:
+            hits = (waypoint_cost.clearance(positions) < 0).numpy()
         if cost is not None:
-            colliding = (cost.clearance(torch.as_tensor(batch, dtype=torch.float64)) < 0).numpy()
-        for trajectory, hits in zip(batch, colliding, strict=True):
-            ax.plot(trajectory[:, 0], trajectory[:, 1], "-", color="tab:blue", lw=0.6, alpha=0.5)
-            ax.plot(trajectory[~hits, 0], trajectory[~hits, 1], ".", color="tab:blue", ms=3)
-            ax.plot(trajectory[hits, 0], trajectory[hits, 1], ".", color="tab:red", ms=4)
-        rate = colliding.any(1).mean()
-        ax.set_title(f"rho = {scale:g}\ncolliding: {rate:.0%} of {len(batch)}", fontsize=8)
+            colliding = (cost.clearance(positions).min(-1).values < 0).numpy()
+        for trajectory, inside, bad in zip(batch, hits, colliding, strict=True):
+            ax.plot(trajectory[:, 0], trajectory[:, 1], "-", color="tab:red" if bad else "tab:blue", lw=0.6, alpha=0.6)
+            ax.plot(trajectory[~inside, 0], trajectory[~inside, 1], ".", color="tab:blue", ms=3)
+            ax.plot(trajectory[inside, 0], trajectory[inside, 1], ".", color="tab:red", ms=4)
+        rate = colliding.mean()
+        xy = batch.reshape(-1, 3)[:, :2]
+        outside = int(((xy[:, 0] < xlim[0]) | (xy[:, 0] > xlim[1]) | (xy[:, 1] < ylim[0]) | (xy[:, 1] > ylim[1])).sum())
+        name = f"rho = {scale:g}" if isinstance(scale, (int, float)) else str(scale)
+        ax.set_title(f"{name}\ncolliding: {rate:.0%} of {len(batch)}" + (f", {outside} pts out of view" if outside
+                                                                         else ""), fontsize=8)
         ax.set_xlim(*xlim)
         ax.set_ylim(*ylim)
         ax.set_aspect("equal")

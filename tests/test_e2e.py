@@ -93,3 +93,24 @@ def test_run_cli_plans_acts_and_writes_video_and_top_view(trained):
         assert (out / f"video_{name}.mp4").stat().st_size > 1000
         assert set(episode["targets"]) == {"bowl", "pan"}
     assert (out / "top_view.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_a_training_budget_stops_the_run_checkpointed_and_a_rerun_skips_it(trained):
+    from lano3dp.pipeline import train_stage
+    from lano3dp.policy import DiffusionPolicy
+    from lano3dp.train import policy_config_for_dataset
+
+    root, _ = trained
+    data = root / "bowl_pour.zarr"
+    policy = policy_config_for_dataset(data, down_dims=(32, 64), point_hidden_dims=(32,), encoder_out=16,
+                                       state_feature_dim=16, diffusion_step_embed_dim=16)
+    run = root / "budget_run"
+    # a budget of ~0 s: the planned steps (at least 50) are cut after the first one, which is checkpointed
+    final = train_stage(data, run, policy_config=policy, minutes=1e-6, batch_size=8, progress=False, val_ratio=0.0)
+    assert final.name == "step_0000001"
+    assert DiffusionPolicy.from_pretrained(run).config.down_dims == (32, 64)
+    saved = json.loads((run / "train_config.json").read_text())
+    assert saved["steps"] == 1 and saved["extra"]["planned_steps"] >= 50
+    messages = []
+    assert train_stage(data, run, policy_config=policy, minutes=1e-6, batch_size=8, log=messages.append) == final
+    assert messages == [f"train: {run} is complete (1 steps); skipping"]

@@ -92,17 +92,54 @@ def time_training_step(data: str | Path, policy_config, batch_size: int, *, warm
     return float(np.median(times))
 
 
+def train_with_deadline(config, seconds: float | None) -> tuple[Path, bool]:
+    """Run a `Trainer` that stops, checkpointed, at the first step after `seconds` of wall time.
+
+    Returns (final checkpoint, whether the deadline cut the run short). The trainer has no time limit
+    of its own, so this wraps its progress bar, which the loop updates after every step and before its
+    checkpoint test: lowering `config.steps` to the current step there makes the loop save this step and
+    end, exactly as at a planned last step. The LR schedule keeps the planned length.
+    """
+    from lano3dp.train import Trainer
+
+    trainer = Trainer(config)
+    stopped = False
+    if seconds is not None:
+        end = time.monotonic() + seconds
+        make_progress = trainer._progress
+
+        def progress():
+            bar = make_progress()
+            update = bar.update
+
+            def update_and_check(n=1):
+                nonlocal stopped
+                result = update(n)
+                if time.monotonic() > end and trainer.step < trainer.config.steps:
+                    trainer.config.steps = trainer.step
+                    stopped = True
+                return result
+
+            bar.update = update_and_check
+            return bar
+
+        trainer._progress = progress
+    return Path(trainer.run()), stopped
+
+
 def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps: int | None = None,
-                minutes: float | None = None, min_steps: int = 200, max_steps: int = 20_000, batch_size: int = 64,
+                minutes: float | None = None, min_steps: int = 50, max_steps: int = 20_000, batch_size: int = 64,
                 lr: float = 1e-3, warmup_steps: int | None = None, ckpt_every: int | None = None, seed: int = 0,
                 log: Log = _quiet, **train_options) -> Path:
     """Train (or resume, or skip) a policy run; returns its final checkpoint folder.
 
-    Give either `steps`, or `minutes` (a wall-clock budget for the optimisation itself: the step count is
-    probed once, see `time_training_step`). An existing run keeps the step count it was started with.
+    Give `steps`, or `minutes`: a wall-clock budget for the optimisation. The planned step count (and so the
+    LR schedule) comes from a short timing probe (`time_training_step`), and the run stops at the deadline
+    if the machine turns out slower than probed. An existing run keeps the step count it was started with;
+    a run cut short by its deadline counts as complete.
     """
     from lano3dp.policy.checkpoint import checkpoint_name, list_checkpoints
-    from lano3dp.train import TrainConfig, policy_config_for_dataset, train
+    from lano3dp.train import TrainConfig, policy_config_for_dataset
 
     run = Path(run)
     saved = run / "train_config.json"
@@ -130,9 +167,14 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
                              val_every=ckpt_every or steps, seed=seed, **train_options)
         log(f"train: {steps} steps, batch {batch_size}, lr {lr:g}, UNet {tuple(policy_config.down_dims)} -> {run}")
     started = time.perf_counter()
-    final = train(config)
+    final, stopped = train_with_deadline(config, minutes * 60 if minutes is not None else None)
+    if stopped:  # the run is complete at the step it reached: record that for re-runs
+        planned = json.loads(saved.read_text())
+        extra = {**planned.get("extra", {}), "planned_steps": planned["steps"], "stopped_by_budget_min": minutes}
+        saved.write_text(json.dumps({**planned, "steps": config.steps, "extra": extra}, indent=2))
+        log(f"train: the {minutes:g} min budget ran out at step {config.steps} (planned {planned['steps']})")
     log(f"train: done in {time.perf_counter() - started:.0f} s -> {final}")
-    return Path(final)
+    return final
 
 
 # ---- evaluate --------------------------------------------------------------------------------------

@@ -11,9 +11,7 @@ Algorithm 1 of the paper (Lan-o3dp), in this loop's names:
     rho         scale             A_{k-1} <- A_{k-1} - rho * grad_{A_k} D(.)             (Eq. 3)
 
 The switch `mode` picks what D is evaluated on: nothing (no guidance), the noisy A_k (the
-prior methods the paper contrasts with), or the clean estimate A_0|k (the paper). The
-scheduler clips its own x_0 estimate to [-1, 1] (clip_sample), but the cost sees the
-unclipped A_0|k, so clipping never zeroes the guidance gradient.
+prior methods the paper contrasts with), or the clean estimate A_0|k (the paper).
 
 Guiding on A_k needs no gradient through the network (D(A_k) depends on A_k directly), so that
 mode costs one extra cost evaluation per step; guiding on A_0|k back-propagates through eps_theta.
@@ -25,13 +23,14 @@ rho pushes DDIM-10 with S = 100 about as often as DDPM-100 with S = 10. With `pe
 rho is multiplied by the stride (training steps per inference step) instead, which keeps the total
 push across a window of S training steps the same as DDPM's; measured in bench/bench_guidance.py.
 
-Push weighting. A push delta on A_{k-1} reaches the final sample amplified by about
-1 / sqrt(abar_{k-1}) (the later steps rescale it like signal), and the gradient itself carries
-d A_0|k / d A_k ~ 1 / sqrt(abar_k). Late DDPM steps have abar ~ 1, so the paper's constant rho is
-fine for S = 10 of 100; but DDIM-10 guided on every step starts at abar_90 ~ 0.02, where the same
-rho moves the result ~50x more, and throws it far off the data. `push_weight="alpha_bar"` multiplies
-each push by sqrt(abar_k * abar_{k-1}), so every guided step moves the final sample by about
-rho * grad whatever its noise level (FreeDoM scales by sqrt(abar_k) for the same reason).
+Push weighting. With eps_theta held fixed, a push delta on A_{k-1} reaches the final sample
+amplified by 1 / sqrt(abar_{k-1}) (later steps rescale it like signal), and the gradient itself
+carries d A_0|k / d A_k = 1 / sqrt(abar_k). Late DDPM steps have abar > 0.97, so the paper's
+constant rho is fine for S = 10 of 100; DDIM-10 guided on every step starts at abar_90 = 0.020,
+abar_80 = 0.085, where this linear estimate puts the same rho ~25x stronger (the trained network
+absorbs part of an early push, so less in practice). `push_weight="alpha_bar"` multiplies each push
+by sqrt(abar_k * abar_{k-1}) (0.041 on DDIM's first step, 1.0 on its last), so every guided step
+moves the final sample by about rho * grad (FreeDoM scales by sqrt(abar_k) for the same reason).
 
 clip_sample. Diffusion Policy's schedulers clip their x_0 estimate to [-1, 1], the normaliser's
 range of the demonstrations. The cost always sees the unclipped A_0|k, so clipping never zeroes the

@@ -17,7 +17,7 @@ import torch
 
 from lano3dp.errors import Lano3dpError
 from lano3dp.geometry.rotations import matrix_to_rot6d
-from lano3dp.guidance import CheckConfig, Cylinder, GuidanceConfig
+from lano3dp.guidance import CheckConfig, Cylinder, Densified, GuidanceConfig, MetricGradient
 from lano3dp.perception import ObjectNotFoundError, ObjectObserver, SimOracleSegmenter
 from lano3dp.perception.synthetic import Box, render_boxes, top_down_camera
 from lano3dp.policy import ActionChunk, PolicyConfig
@@ -99,6 +99,10 @@ class FakePolicy:
         self.config = PolicyConfig(obs_type=obs_type, n_obs_steps=2, horizon=16, n_action_steps=n_action_steps,
                                    **kwargs)
         self.calls: list[dict] = []
+
+    def normalizer_stats(self):
+        low, high = np.array([0.2, -0.3, 0.1] + [-1] * 6 + [0]), np.array([0.6, 0.3, 0.4] + [1] * 6 + [1])
+        return {"action": {"min": low, "max": high}}
 
     def predict_action_chunk(self, obs, *, guidance=None, position_cost=None, scheduler=None,
                              num_inference_steps=None, generator=None):
@@ -203,6 +207,25 @@ def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(obser
                          obstacle_phrases=["obstacle_0"])
     fixed.push(frame, state)
     assert fixed.held_radius == 0.05
+
+
+def test_the_cost_can_be_densified_and_pushed_isotropically_in_metres(observer):
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    obs, _ = env.reset(seed=0)
+    frame, state = observe(env, obs)
+    config = RuntimeConfig(obstacle=ObstacleModel(held_radius=0.03), metric_gradient=True, densify=4)
+    runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
+    runner.push(frame, state)
+    cost = runner.obstacle_cost
+    assert isinstance(cost, MetricGradient) and isinstance(cost.cost, Densified) and cost.cost.factor == 4
+    # the MetricGradient weight is the normaliser scale squared: (2 / span)^2 per position axis
+    np.testing.assert_allclose(cost.weight.numpy(), (2 / np.array([0.4, 0.6, 0.3])) ** 2)
+    # two waypoints either side of the obstacle: both clear, but the segment between them is not
+    straddle = torch.tensor([[[OBSTACLE.center_xy[0], -0.2, 0.2], [OBSTACLE.center_xy[0], 0.2, 0.2]]])
+    assert runner.obstacles.clearance(straddle).min() > 0
+    assert cost.clearance(straddle).min() < 0
+    with pytest.raises(ValueError, match="densify"):
+        RuntimeConfig(densify=0)
 
 
 def test_guidance_reaches_the_policy_only_with_obstacles_and_bends_the_path_clear(observer):

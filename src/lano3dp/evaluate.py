@@ -36,9 +36,12 @@ from typing import Any
 import numpy as np
 
 DEFAULT_EVAL_SEED = 1_000_000
-# Guidance defaults: A_0|k cost on every DDIM step (S = 100 training steps covers all 10), metric push of
-# 3 cm per guided step. The paper's setting (DDPM-100, S = 10, push in normalised units) stays available.
-DEFAULT_RHO = 0.03
+# Guidance defaults: A_0|k cost on every DDIM step (S = 100 training steps covers all 10), isotropic metric push
+# of 4 cm per guided step on the densified path: in results/bench_guidance.json (issue 3's sweep) DDIM-10 with
+# these settings left 1% of sampled trajectories colliding (2 cm: 12%). The paper's setting (DDPM-100, S = 10,
+# push in normalised units: --paper-push) stays available.
+DEFAULT_RHO = 0.04
+DEFAULT_DENSIFY = 4
 DEFAULT_LAST_STEPS = 100
 SUMMARY_FIELDS = ("episodes", "success_rate", "collision_rate", "safe_success_rate", "error_rate",
                   "mean_min_clearance", "mean_path_length", "mean_steps", "latency_mean_s", "latency_p95_s")
@@ -59,6 +62,7 @@ class EvalConfig:
         rho, last_steps, per_train_step: the guidance scale, S, and whether rho is scaled by the scheduler stride.
         metric_gradient: push isotropically in metres (rho = metres per guided step; `guidance.MetricGradient`);
             False is the paper's push, in the normaliser's units (rho then needs to be far larger).
+        densify: points per segment the cost and the check see (1: waypoints only, as the paper).
         scheduler, steps: inference scheduler and its number of denoising steps (None: the policy's default).
         checked: checked execution (re-sample with a larger rho while the executed part collides).
         margin, held_radius: obstacle model; held_radius None measures it from the held object's cloud.
@@ -81,6 +85,7 @@ class EvalConfig:
     last_steps: int = DEFAULT_LAST_STEPS
     per_train_step: bool = False
     metric_gradient: bool = True
+    densify: int = DEFAULT_DENSIFY
     scheduler: str | None = None
     steps: int | None = None
     checked: bool = False
@@ -154,8 +159,8 @@ def runtime_config(config: EvalConfig, seed: int):
         guidance=guidance_config(config), scheduler=config.scheduler, num_inference_steps=config.steps,
         n_action_steps=config.n_action_steps,
         obstacle=ObstacleModel(margin=config.margin, held_radius=config.held_radius),
-        checked=CheckConfig(initial_scale=max(config.rho, 1e-3)) if config.checked else None,
-        metric_gradient=config.metric_gradient, seed=seed)
+        checked=CheckConfig(initial_scale=max(config.rho, 1e-3), densify=config.densify) if config.checked else None,
+        metric_gradient=config.metric_gradient, densify=config.densify, seed=seed)
 
 
 # ---- one process: policy + env + episodes ---------------------------------------------------------

@@ -36,7 +36,7 @@ import torch
 from lano3dp.errors import Lano3dpError
 from lano3dp.geometry.frame import RGBDFrame
 from lano3dp.guidance.checked import CheckConfig, checked_sample
-from lano3dp.guidance.costs import MetricGradient, ObstacleSet, PointCloudObstacle, PositionCost
+from lano3dp.guidance.costs import Densified, MetricGradient, ObstacleSet, PointCloudObstacle, PositionCost
 from lano3dp.guidance.fitting import fit_box, fit_cylinder
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
 
@@ -107,6 +107,8 @@ class RuntimeConfig:
             policy's action normaliser; beyond the paper). Without it the per-axis min-max normaliser makes the
             push across a narrow demonstration range far weaker than the push along the path, and rho is in
             normalised units; with it rho reads as metres per guided step.
+        densify: cost (and check) the path with `densify - 1` extra points inside each segment, so a segment
+            cannot straddle a thin obstacle between two clear waypoints (`guidance.costs.Densified`; 1 = off).
         seed: seeds the sampling noise (one torch.Generator per runner, re-seeded on reset).
     """
 
@@ -118,6 +120,7 @@ class RuntimeConfig:
     checked: CheckConfig | None = None
     on_unclear: str = "execute"
     metric_gradient: bool = False
+    densify: int = 1
     seed: int = 0
 
     def __post_init__(self):
@@ -125,6 +128,8 @@ class RuntimeConfig:
             raise ValueError(f"on_unclear must be 'execute' or 'stop', got {self.on_unclear!r}")
         if self.n_action_steps is not None and self.n_action_steps < 1:
             raise ValueError(f"n_action_steps must be >= 1, got {self.n_action_steps}")
+        if self.densify < 1:
+            raise ValueError(f"densify must be >= 1, got {self.densify}")
 
     @property
     def guided(self) -> bool:
@@ -388,10 +393,13 @@ class PolicyRunner:
         clouds = self.observer.observe(frame, self.obstacle_phrases)
         costs = [self.config.obstacle.fit(points, self.held_radius) for points in clouds.points]
         self.obstacles = ObstacleSet(costs)
+        cost: PositionCost = self.obstacles
+        if self.config.densify > 1:
+            cost = Densified(cost, self.config.densify)
         if self.config.metric_gradient:
             stats = self.policy.normalizer_stats()["action"]
-            return MetricGradient.from_stats(self.obstacles, stats["min"], stats["max"])
-        return self.obstacles
+            cost = MetricGradient.from_stats(cost, stats["min"], stats["max"])
+        return cost
 
     # ---- acting ----------------------------------------------------------------------------
     def plan(self) -> ChunkRecord:

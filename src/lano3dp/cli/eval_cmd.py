@@ -6,7 +6,7 @@ from pathlib import Path
 
 import typer
 
-from lano3dp.evaluate import DEFAULT_LAST_STEPS, DEFAULT_RHO
+from lano3dp.evaluate import DEFAULT_DENSIFY, DEFAULT_LAST_STEPS, DEFAULT_RHO
 
 
 def register(app: typer.Typer) -> None:
@@ -30,6 +30,8 @@ def eval_command(
                                      help="Push isotropically in metres, or as the paper in normalised action units "
                                           "(which needs a far larger rho)."),
     per_train_step: bool = typer.Option(False, help="Scale rho by the scheduler stride (DDIM pushes as much as DDPM)."),
+    densify: int = typer.Option(DEFAULT_DENSIFY, min=1, help="Points per path segment the cost sees (1: waypoints "
+                                                            "only, as the paper)."),
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, help="Denoising steps (default: the policy's)."),
     checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
@@ -51,7 +53,7 @@ def eval_command(
     config = EvalConfig(
         checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
         obstacles=list(obstacles) if obstacles else None, guidance=guidance, rho=rho, last_steps=last_steps,
-        per_train_step=per_train_step, metric_gradient=metric_push, scheduler=scheduler, steps=steps,
+        per_train_step=per_train_step, metric_gradient=metric_push, densify=densify, scheduler=scheduler, steps=steps,
         checked=checked, margin=margin,
         held_radius=held_radius, max_steps=max_steps, workers=workers,
         video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out))

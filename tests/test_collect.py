@@ -37,3 +37,25 @@ def test_collect_writes_the_documented_keys_and_resumes(tmp_path):
     store = EpisodeStore.open(out)
     assert store.n_episodes == 3 and store.attrs["episode_seeds"] == [0, 1, 2]
     np.testing.assert_array_equal(store.get_episode(0)["action"], episode["action"])
+
+
+def test_failed_expert_episodes_are_never_stored(tmp_path):
+    import pytest
+
+    from lano3dp.data.collect import MAX_TRIES, CollectionError
+
+    out = tmp_path / "short.zarr"
+    # 5 steps are far too few for the expert: every seed fails, nothing is written.
+    with pytest.raises(CollectionError, match=f"failed on {MAX_TRIES} seeds"):
+        collect("bottle_upright", 1, out, image_size=32, n_points=32, progress=False, max_steps=5)
+    assert EpisodeStore.open(out).n_episodes == 0
+
+
+def test_similar_scenes_record_the_colour_named_target(tmp_path):
+    out = tmp_path / "similar.zarr"
+    collect("bottle_upright", 1, out, variation="similar", image_size=64, n_points=32, progress=False)
+    store = EpisodeStore.open(out)
+    assert store.attrs["variation"] == "similar" and store.attrs["object_names"] == ["bottle"]
+    clouds = store.get_episode(0)["object_clouds"]
+    # The lying green target is 2.5 cm above the table; the standing look-alikes would average ~6 cm.
+    assert abs(clouds[0, 0, :, 2].mean() - 0.025) < 0.015

@@ -61,6 +61,7 @@ class CollectConfig:
     crop_low: tuple[float, float, float] = CROP_LOW
     crop_high: tuple[float, float, float] = CROP_HIGH
     min_points: int = 10
+    max_steps: int | None = None  # episode limit (default: the task's); an expert that needs more fails
     progress: bool = True
 
 
@@ -91,7 +92,7 @@ def collect_episodes(config: CollectConfig) -> CollectResult:
     started = time.perf_counter()
     variation = Variation.parse(config.variation)
     env = TabletopEnv(config.task, variation=variation, image_size=config.image_size, render_rgb=True,
-                      control_hz=CONTROL_HZ)
+                      control_hz=CONTROL_HZ, max_steps=config.max_steps)
     task = env.task
     attrs = {
         "skill": task.skill,

@@ -34,6 +34,8 @@ def demo_command(
     episodes: int = typer.Option(10, min=1, help="Evaluation episodes per condition."),
     rho: float = typer.Option(DEFAULT_RHO, help="Guidance scale rho (metres per guided step: isotropic push)."),
     last_steps: int = typer.Option(DEFAULT_LAST_STEPS, help="Guide while the training-scale step k <= S (100: all)."),
+    points: int = typer.Option(128, min=16, help="Points per object cloud (2 objects x 128 keeps a training step "
+                                                 "cheap on a CPU: notes/cpu-cost.md)."),
     workers: int = typer.Option(2, min=1, help="Parallel evaluation processes."),
     seed: int = typer.Option(0, help="Seed of the collection and training."),
 ) -> None:
@@ -46,8 +48,8 @@ def demo_command(
     console = Console()
     try:
         report = run_demo(command=command_line(ctx), out=out, task=task, demos=demos, minutes=minutes, steps=steps,
-                          episodes=episodes, rho=rho,
-                          last_steps=last_steps, workers=workers, seed=seed, console=console)
+                          episodes=episodes, rho=rho, last_steps=last_steps, points=points, workers=workers, seed=seed,
+                          console=console)
     except Lano3dpError as error:
         console.print(f"[red]error:[/red] {error}")
         raise typer.Exit(1) from error
@@ -63,7 +65,7 @@ CONDITIONS = (
 
 
 def run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, steps: int | None, episodes: int,
-             rho: float, last_steps: int, workers: int, seed: int, console) -> Path:
+             rho: float, last_steps: int, points: int, workers: int, seed: int, console) -> Path:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from lano3dp.evaluate import EvalConfig, write_json
@@ -89,7 +91,8 @@ def run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, 
 
     console.rule(f"[bold]lano3dp demo: {task}[/bold]")
     log(f"1/4 collecting {demos} scripted-expert demonstrations of {task} (clean scenes, no obstacles)")
-    data = timed("collect_s", lambda: collect_stage(task, demos, out / "data" / f"{task}.zarr", log=log, seed=seed))
+    data = timed("collect_s", lambda: collect_stage(task, demos, out / "data" / f"{task}.zarr", log=log, seed=seed,
+                                                    n_points=points))
 
     budget = f"{steps} steps" if steps else f"{minutes:g} min"
     log(f"2/4 training a small object-centric diffusion policy ({budget})")

@@ -3,7 +3,7 @@
 Action (10,) float: absolute EE target = position (3, metres, world frame) + rotation 6D
 (6: first two columns of the EE rotation matrix) + gripper command (1: 0 open .. 1 closed).
 Each `step` moves the mocap target from the previous target to this one over the control
-period (1 / control_hz s = 50 physics steps of 2 ms at 10 Hz), so large jumps are spread out.
+period (1 / control_hz s = 25 physics steps of 4 ms at 10 Hz), so large jumps are spread out.
 
 Bad actions:
   * NaN / inf anywhere, wrong shape, or a degenerate rotation 6D (zero or parallel columns)
@@ -79,7 +79,7 @@ class TabletopEnv(gym.Env):
         camera: "front" (training) or "shifted", or a `CameraPose`; the "camera" variation forces "shifted".
         image_size: square image side in pixels (or (height, width)).
         render_rgb: also render the colour image (depth + segmentation are always rendered).
-        control_hz: control rate; physics runs at 500 Hz.
+        control_hz: control rate (physics runs at 250 Hz, 4 ms steps; 1 / control_hz must be a multiple of 20 ms).
         max_steps: episode limit (default: the task's).
     """
 

@@ -33,7 +33,7 @@ from lano3dp.sim.robot import GripperSpec, add_gripper
 
 TABLE_CENTER = np.array([0.45, 0.0])
 TABLE_HALF = np.array([0.45, 0.6])
-TIMESTEP = 0.004
+TIMESTEP = 0.004  # s; half the cost of 2 ms, and every expert still succeeds (see bench/bench_sim.py)
 
 
 class SceneError(Lano3dpError, ValueError):

@@ -1,9 +1,9 @@
 """bottle_in_drawer: put a bottle, standing upright, into an open drawer (the paper's real task).
 
-Layout: the drawer cabinet as in `open_drawer` (centre x in [0.36, 0.46], |y| in [0.04, 0.18],
-front towards +x, yaw in [-0.5, 0.5] rad) but open by 85-100% of its travel; an upright bottle
+Layout: the drawer cabinet as in `open_drawer` (on one side of the table, its front towards the
+middle and turned towards the camera) but open by 85-100% of its travel; an upright bottle
 (`primitives.add_bottle`, 19 cm tall at scale 1) on the other side of the table
-(x in [0.28, 0.58], y of the opposite sign, |y| in [0.10, 0.32]), 5 cm clear of the
+(x in [0.28, 0.58], y of the opposite sign, |y| in [0.08, 0.26]), 5 cm clear of the
 drawer's footprint and of the pulled-out drawer. As in
 the paper the bottle's orientation does not change: it stays upright. Instance variation: bottle
 and drawer scaled 0.8 / 1.2 independently and recoloured.
@@ -77,7 +77,7 @@ class BottleInDrawer(Task):
         scale = self.instance_scale(rng, variation)
         color = str(rng.choice(BOTTLE_COLORS)) if variation.has("instance") else "green"
         radius = primitives.FOOTPRINTS["bottle"] * scale
-        xy = sample_beside(rng, objects, radius, (0.28, 0.58), (0.10, 0.32))
+        xy = sample_beside(rng, objects, radius, (0.28, 0.58), (0.08, 0.26))
         objects["bottle"] = Placement("bottle", np.array([*xy, 0.0]), 0.0, color, scale, radius)
         layout = Layout(seed=0, objects=objects)
         layout.set_names(self.object_slots, variation)

@@ -1,9 +1,9 @@
 """put_item_in_drawer: pick a block and put it into an open drawer (RLBench `put_item_in_drawer`).
 
-Layout: the drawer cabinet as in `open_drawer` (centre x in [0.36, 0.46], |y| in [0.04, 0.18],
-front towards +x, yaw in [-0.5, 0.5] rad) open by 85-100% of its travel; a 4 cm block
+Layout: the drawer cabinet as in `open_drawer` (on one side of the table, its front towards the
+middle and turned towards the camera) open by 85-100% of its travel; a 4 cm block
 (`objects.articulated.add_block`, 60 g, kind "block") at a random yaw on the other side
-of the table (x in [0.28, 0.58], opposite sign of y, |y| in [0.10, 0.32]), 5 cm clear of the
+of the table (x in [0.28, 0.58], opposite sign of y, |y| in [0.08, 0.26]), 5 cm clear of the
 drawer's footprint and of the pulled-out drawer. Instance variation:
 block and drawer scaled 0.8 / 1.2 independently and recoloured.
 
@@ -53,7 +53,7 @@ class PutItemInDrawer(Task):
         scale = self.instance_scale(rng, variation)
         color = str(rng.choice(BLOCK_COLORS)) if variation.has("instance") else "blue"
         radius = 1.5 * BLOCK_HALF * scale
-        xy = sample_beside(rng, objects, radius, (0.28, 0.58), (0.10, 0.32))
+        xy = sample_beside(rng, objects, radius, (0.28, 0.58), (0.08, 0.26))
         objects["block"] = Placement("block", np.array([*xy, 0.0]), float(rng.uniform(-np.pi, np.pi)), color, scale,
                                      radius)
         layout = Layout(seed=0, objects=objects)

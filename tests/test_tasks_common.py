@@ -193,3 +193,19 @@ def test_slot_objects_are_visible_to_the_camera(task, variation):
                 assert pixels >= 15, f"{task} seed {seed}: the {slot} covers only {pixels} pixels"
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("task", TASKS)
+def test_every_variation_axis_builds(task):
+    """All axes at once build a scene with the slot objects and the extras the axes add."""
+    env = make_env(task, "clutter+similar+instance+camera+background+obstacle")
+    try:
+        roles = set()
+        for seed in range(4):
+            env.reset(seed=seed)
+            for slot in env.task.object_slots:
+                assert env.episode.layout.names[slot] in env.objects
+            roles |= {info.role for info in env.objects.values()}
+        assert {"target", "distractor", "obstacle"} <= roles
+    finally:
+        env.close()

@@ -7,8 +7,9 @@ every step (a cylinder-like hinge cost on the xy distance, written inline).
 
     OMP_NUM_THREADS=2 python bench/bench_policy.py [--threads 2] [--size small] [--out results/bench_policy.json]
 
-Timings are wall-clock medians; the machine may be shared, so the load average before and after is
-recorded with them. Read them with that in mind.
+Timings are wall-clock medians, with the process CPU time beside them; the machine may be shared, so
+the load average before and after is recorded with them. With one thread and a busy machine, the CPU
+time is the better estimate of the quiet wall time.
 """
 
 from __future__ import annotations
@@ -46,15 +47,15 @@ def random_obs(config: PolicyConfig, batch: int, n_points: int, generator: torch
     return {"object_clouds": clouds, "state": state}
 
 
-def time_training(policy: DiffusionPolicy, batch: int, n_points: int, steps: int, bf16: bool) -> list[float]:
+def time_training(policy: DiffusionPolicy, batch: int, n_points: int, steps: int, bf16: bool) -> tuple[list, list]:
     generator = torch.Generator().manual_seed(0)
     optimizer = torch.optim.AdamW(policy.parameters(), lr=5e-4, betas=(0.95, 0.999), weight_decay=1e-6, fused=True)
     ema = EMA(policy)
     data = {"obs": random_obs(policy.config, batch, n_points, generator),
             "action": torch.rand(batch, policy.config.horizon, 10, generator=generator) * 2 - 1}
-    durations = []
+    durations, cpu = [], []
     for step in range(steps + 3):  # the first steps warm up oneDNN's kernels
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
             loss = policy.compute_loss(data, generator=generator)
         optimizer.zero_grad(set_to_none=True)
@@ -63,19 +64,21 @@ def time_training(policy: DiffusionPolicy, batch: int, n_points: int, steps: int
         ema.update(policy)
         if step >= 3:
             durations.append(time.perf_counter() - start)
-    return durations
+            cpu.append(time.process_time() - start_cpu)
+    return durations, cpu
 
 
-def time_inference(policy: DiffusionPolicy, n_points: int, repeats: int, **kwargs) -> list[float]:
+def time_inference(policy: DiffusionPolicy, n_points: int, repeats: int, **kwargs) -> tuple[list, list]:
     generator = torch.Generator().manual_seed(0)
     obs = random_obs(policy.config, 1, n_points, generator)
-    durations = []
+    durations, cpu = [], []
     for index in range(repeats + 1):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         policy.predict_action_chunk(obs, generator=generator, **kwargs)
         if index:
             durations.append(time.perf_counter() - start)
-    return durations
+            cpu.append(time.process_time() - start_cpu)
+    return durations, cpu
 
 
 def hinge_cost(positions: torch.Tensor) -> torch.Tensor:
@@ -84,9 +87,11 @@ def hinge_cost(positions: torch.Tensor) -> torch.Tensor:
     return torch.relu(0.1 - distance).sum(dim=-1)
 
 
-def summary(durations: list[float]) -> dict:
+def summary(timings: tuple[list, list]) -> dict:
+    """Wall-clock median/min/max, and the median process CPU time (the sum over threads)."""
+    durations, cpu = timings
     return {"median_s": statistics.median(durations), "min_s": min(durations), "max_s": max(durations),
-            "n": len(durations)}
+            "median_cpu_s": statistics.median(cpu), "n": len(durations)}
 
 
 def main() -> None:
@@ -110,8 +115,8 @@ def main() -> None:
     parameters = sum(p.numel() for p in policy.parameters())
     results: dict = {"training": {}, "inference_batch1": {}}
     for bf16 in (False, True):
-        durations = time_training(policy.train(), args.batch, args.n_points, args.train_steps, bf16)
-        entry = summary(durations) | {"steps_per_s": 1.0 / statistics.median(durations)}
+        entry = summary(time_training(policy.train(), args.batch, args.n_points, args.train_steps, bf16))
+        entry["steps_per_s"] = 1.0 / entry["median_s"]
         results["training"]["bf16_autocast" if bf16 else "fp32"] = entry
         print(f"train {'bf16' if bf16 else 'fp32'}: {entry['steps_per_s']:.2f} steps/s "
               f"({entry['median_s'] * 1000:.0f} ms/step)", flush=True)
@@ -141,7 +146,8 @@ def main() -> None:
                   "points_per_object": args.n_points, "horizon": policy.config.horizon,
                   "n_obs_steps": policy.config.n_obs_steps},
         "results": results,
-        "note": "wall-clock medians on a machine shared with other jobs; compare with the load averages",
+        "note": "wall-clock medians on a machine shared with other jobs; compare with the load averages. "
+                "median_cpu_s is process CPU time (all threads).",
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(record, indent=2) + "\n")

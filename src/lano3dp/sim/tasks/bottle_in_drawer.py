@@ -73,11 +73,13 @@ class BottleInDrawer(Task):
     similar_slots = ("bottle",)
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
-        objects = sample_drawer(rng, variation, opening=(0.85, 1.0))
         scale = self.instance_scale(rng, variation)
         color = str(rng.choice(BOTTLE_COLORS)) if variation.has("instance") else "green"
         radius = primitives.FOOTPRINTS["bottle"] * scale
-        xy = sample_beside(rng, objects, radius, (0.28, 0.58), (0.08, 0.26))
+        xy = None
+        while xy is None:  # a large drawer pulled out across the table can leave no room: redraw it
+            objects = sample_drawer(rng, variation, opening=(0.85, 1.0))
+            xy = sample_beside(rng, objects, radius, (0.28, 0.58), (0.08, 0.26))
         objects["bottle"] = Placement("bottle", np.array([*xy, 0.0]), 0.0, color, scale, radius)
         layout = Layout(seed=0, objects=objects)
         layout.set_names(self.object_slots, variation)

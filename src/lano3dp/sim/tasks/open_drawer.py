@@ -75,16 +75,20 @@ def close_gently(plan: MotionPlan, start: float, steps: int = 5, settle: int = 3
 
 
 def sample_beside(rng: np.random.Generator, objects: dict[str, Placement], radius: float, x_range, y_range,
-                  margin: float = 0.05) -> np.ndarray:
-    """(2,) table position for a loose object of footprint `radius` on the side of the table (sign
-    of y) opposite the drawer, clear of every placed footprint by `margin` (room for the fingers)."""
+                  margin: float = 0.05) -> np.ndarray | None:
+    """(2,) table position for a loose object of footprint `radius`, clear of every placed footprint
+    by `margin` (room for the fingers): preferably on the side of the table (sign of y) opposite the
+    drawer within the given ranges, else anywhere in the camera's view of the table; None if the
+    drawer leaves no room (the caller samples a new drawer)."""
     side = -np.sign(objects["drawer"].position[1])
-    low, high = np.array([x_range[0], y_range[0]]), np.array([x_range[1], y_range[1]])
-    for _ in range(500):
-        xy = rng.uniform(low, high) * np.array([1.0, side])
-        if all(np.linalg.norm(xy - p.position[:2]) >= p.radius + radius + margin for p in objects.values()):
-            return xy
-    raise RuntimeError(f"no free table spot for an object of radius {radius:.3f} m beside the drawer")
+    regions = [(np.array([x_range[0], side * y_range[0]]), np.array([x_range[1], side * y_range[1]])),
+               (np.array([0.22, -0.30]), np.array([0.64, 0.30]))]
+    for low, high in regions:
+        for _ in range(300):
+            xy = rng.uniform(np.minimum(low, high), np.maximum(low, high))
+            if all(np.linalg.norm(xy - p.position[:2]) >= p.radius + radius + margin for p in objects.values()):
+                return xy
+    return None
 
 
 def build_drawer(builder, layout: Layout) -> None:

@@ -49,11 +49,13 @@ class PutItemInDrawer(Task):
     similar_slots = ("block",)
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
-        objects = sample_drawer(rng, variation, opening=(0.85, 1.0))
         scale = self.instance_scale(rng, variation)
         color = str(rng.choice(BLOCK_COLORS)) if variation.has("instance") else "blue"
         radius = 1.5 * BLOCK_HALF * scale
-        xy = sample_beside(rng, objects, radius, (0.28, 0.58), (0.08, 0.26))
+        xy = None
+        while xy is None:  # a large drawer pulled out across the table can leave no room: redraw it
+            objects = sample_drawer(rng, variation, opening=(0.85, 1.0))
+            xy = sample_beside(rng, objects, radius, (0.28, 0.58), (0.08, 0.26))
         objects["block"] = Placement("block", np.array([*xy, 0.0]), float(rng.uniform(-np.pi, np.pi)), color, scale,
                                      radius)
         layout = Layout(seed=0, objects=objects)

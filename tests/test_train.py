@@ -45,7 +45,7 @@ def write_reach_store(path: Path, episodes: int = 8, length: int = 10, points: i
 
 
 def micro_config(data: Path, out: Path, **changes) -> TrainConfig:
-    policy = policy_config_for_dataset(data, **MICRO)
+    policy = changes.pop("policy", None) or policy_config_for_dataset(data, **MICRO)
     return TrainConfig(**(dict(data=str(data), out=str(out), policy=policy, steps=6, batch_size=8, lr=1e-3,
                                warmup_steps=2, val_ratio=0.25, val_every=3, ckpt_every=3, log_every=1,
                                progress=False) | changes))
@@ -107,6 +107,27 @@ def test_a_run_writes_ema_checkpoints_logs_and_a_last_pointer(reach_data, tmp_pa
     assert learning_rates[2:] == sorted(learning_rates[2:], reverse=True) and learning_rates[-1] < 2e-4  # cosine
     # Training again on a finished run does nothing and returns the same checkpoint.
     assert train(micro_config(reach_data, out)) == final
+
+
+@pytest.mark.parametrize("obs_type", ["scene", "image"])
+def test_the_baselines_train_through_the_same_loop(tmp_path, obs_type):
+    rng = np.random.default_rng(0)
+    store = EpisodeStore.create(tmp_path / "baseline.zarr", {"skill": "reach_marker"})
+    for _ in range(3):
+        length = 9
+        visual = (rng.uniform(-0.3, 0.3, (length, 64, 3)).astype(np.float32) if obs_type == "scene"
+                  else rng.integers(0, 256, (length, 32, 32, 3), dtype=np.uint8))
+        store.append_episode({"action": rng.normal(size=(length, 10)).astype(np.float32),
+                              "state": rng.normal(size=(length, 11)).astype(np.float32),
+                              ("scene_cloud" if obs_type == "scene" else "rgb"): visual})
+    policy = policy_config_for_dataset(tmp_path / "baseline.zarr", obs_type=obs_type, **MICRO)
+    assert (policy.scene_points, policy.image_size) == ((64, 96) if obs_type == "scene" else (512, 32))
+    config = micro_config(tmp_path / "baseline.zarr", tmp_path / "run", policy=policy, steps=2, ckpt_every=2,
+                          val_ratio=0.0)
+    loaded = DiffusionPolicy.from_pretrained(train(config))
+    assert loaded.config.obs_type == obs_type
+    obs = {key: value[None] for key, value in store.get_episode(0, [policy.visual_key, "state"]).items()}
+    assert loaded.predict_action_chunk(obs, num_inference_steps=2).actions.shape == (1, 4, 10)
 
 
 def test_bf16_autocast_trains(reach_data, tmp_path):

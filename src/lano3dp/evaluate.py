@@ -13,9 +13,9 @@ not depend on the number of workers. Latencies measured with several workers inc
 
 Perception in simulation is the ground-truth segmenter (`SimOracleSegmenter`); targets are named by
 the phrases the scene uses (e.g. "blue bowl" among look-alikes) and obstacles, by default, are the
-objects the scene marks as obstacles. Crop box, points per object and image size follow the dataset
-the checkpoint was trained on (found through its train_config.json), so evaluation sees what
-training saw.
+objects the scene marks as obstacles. Crop box and image size follow the dataset the checkpoint was
+trained on (found through its train_config.json) and points per cloud follow the policy's config, so
+evaluation sees what training saw.
 """
 
 from __future__ import annotations
@@ -184,7 +184,7 @@ class EpisodeRunner:
         needs_rgb = self.policy.config.obs_type == "image" or bool(config.video_dir)
         self.env = TabletopEnv(task, variation=config.variation, image_size=image_size, render_rgb=needs_rgb,
                                max_steps=config.max_steps)
-        self.observer = ObjectObserver(SimOracleSegmenter(), n_points=settings.n_points or self.policy.config.n_points,
+        self.observer = ObjectObserver(SimOracleSegmenter(), n_points=self.policy.config.n_points,
                                        crop_low=settings.crop_low, crop_high=settings.crop_high)
 
     def run(self, seed: int, video_path: str | None = None) -> dict[str, Any]:
@@ -456,7 +456,7 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
     variation = config.variation or ("obstacle" if plan.obstacles else "clean")
     env = TabletopEnv(task, variation=variation, image_size=settings.image_size or 128, render_rgb=True,
                       max_steps=config.max_steps)
-    observer = ObjectObserver(SimOracleSegmenter(), n_points=settings.n_points or policy.config.n_points,
+    observer = ObjectObserver(SimOracleSegmenter(), n_points=policy.config.n_points,
                               crop_low=settings.crop_low, crop_high=settings.crop_high)
     _, _ = env.reset(seed=config.seed)
     frame = env.frame()

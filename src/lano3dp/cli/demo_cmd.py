@@ -29,7 +29,8 @@ def demo_command(
     out: Path = typer.Option(Path("lano3dp_demo"), help="Output folder (re-running with it resumes)."),
     task: str = typer.Option("bowl_pour", help="Simulator task."),
     demos: int = typer.Option(30, min=2, help="Scripted-expert demonstrations to collect."),
-    minutes: float = typer.Option(6.0, help="Training budget in minutes (the step count is measured from it)."),
+    minutes: float = typer.Option(6.0, help="Training budget in minutes: a wall-clock deadline (a short timing "
+                                            "probe sizes the LR schedule)."),
     steps: int = typer.Option(None, help="Train exactly this many steps instead of a time budget."),
     episodes: int = typer.Option(10, min=1, help="Evaluation episodes per condition."),
     rho: float = typer.Option(DEFAULT_RHO, help="Guidance scale rho (metres per guided step: isotropic push)."),

@@ -130,6 +130,19 @@ def test_the_baselines_train_through_the_same_loop(tmp_path, obs_type):
     assert loaded.predict_action_chunk(obs, num_inference_steps=2).actions.shape == (1, 4, 10)
 
 
+def test_a_policy_can_train_on_fewer_points_than_the_dataset_holds(reach_data, tmp_path):
+    policy = policy_config_for_dataset(reach_data, **MICRO, n_points=8)  # the dataset holds 16
+    trainer = Trainer(micro_config(reach_data, tmp_path / "run", policy=policy, steps=3, val_ratio=0.0))
+    seen = []
+    trainer.policy.obs_encoder.visual.register_forward_pre_hook(lambda module, args: seen.append(args[0].clone()))
+    trainer.run()
+    assert [tuple(clouds.shape[-2:]) for clouds in seen] == [(8, 3)] * 3
+    assert not torch.equal(seen[0], seen[1])  # a fresh subset every step
+    too_many = policy_config_for_dataset(reach_data, **MICRO, n_points=32)
+    with pytest.raises(TrainingConfigError, match="holds 16 points per cloud"):
+        Trainer(micro_config(reach_data, tmp_path / "other", policy=too_many))
+
+
 def test_bf16_autocast_trains(reach_data, tmp_path):
     final = train(micro_config(reach_data, tmp_path / "run", bf16=True, steps=2, ckpt_every=2, val_ratio=0.0))
     assert load_training_state(final).step == 2

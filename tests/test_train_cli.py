@@ -37,11 +37,11 @@ def test_train_command_reports_a_dataset_that_lacks_the_observation(tmp_path):
     assert "scene_cloud" in result.output
 
 
-def test_train_command_rejects_a_point_count_the_dataset_does_not_have(tmp_path):
+def test_train_command_rejects_more_points_than_the_dataset_has(tmp_path):
     data = _reach_store(tmp_path)
     result = CliRunner().invoke(app, ["train", "--data", str(data), "--out", str(tmp_path / "run"),
-                                      "--n-points", "64"])
-    assert result.exit_code != 0 and "16 points per object" in result.output
+                                      "--n-points", "64", "--no-progress"])
+    assert result.exit_code == 1 and "holds 16 points per cloud" in result.output
 
 
 def test_train_help_lists_the_options():

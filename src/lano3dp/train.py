@@ -193,6 +193,7 @@ class Trainer:
         policy_config = self._policy_config(resume_from)
 
         store = EpisodeStore.open(config.data)
+        self.subsample_points: int | None = None
         self._check_dataset(store, policy_config)
         train_episodes, val_episodes = split_episodes(store.n_episodes, config.val_ratio, config.seed)
         window = dict(obs_keys=policy_config.obs_keys, n_obs_steps=policy_config.n_obs_steps,
@@ -270,6 +271,31 @@ class Trainer:
             slots = _step_shapes(store)["object_clouds"][0]
             if slots != policy_config.n_slots:
                 raise TrainingConfigError(f"{store.path} has {slots} object slots, the policy {policy_config.n_slots}")
+        if policy_config.obs_type != "image":
+            stored = _step_shapes(store)[policy_config.visual_key][-2]
+            wanted = self._points_per_cloud(policy_config)
+            if wanted > stored:
+                raise TrainingConfigError(f"{store.path} holds {stored} points per cloud, the policy asks for "
+                                          f"{wanted}; record the dataset with more points or lower n_points")
+            self.subsample_points = wanted if wanted < stored else None
+
+    @staticmethod
+    def _points_per_cloud(policy_config: PolicyConfig) -> int:
+        return policy_config.n_points if policy_config.obs_type == "objects" else policy_config.scene_points
+
+    def _subsample(self, batch: dict, generator: torch.Generator) -> dict:
+        """Keep a random subset of n_points points of every cloud (one index set per batch).
+
+        Training cost is linear in the number of points, so a policy may train on fewer points than
+        the dataset holds; the clouds are farthest-point samples, and a random subset of one keeps
+        their coverage roughly (at inference the observer samples n_points by FPS directly).
+        """
+        if self.subsample_points is None:
+            return batch
+        key = self.policy.config.visual_key
+        clouds = batch["obs"][key]
+        keep = torch.randperm(clouds.shape[-2], generator=generator, device=generator.device)[: self.subsample_points]
+        return {**batch, "obs": {**batch["obs"], key: clouds.index_select(-2, keep.to(clouds.device))}}
 
     @staticmethod
     def _load_weights(module: torch.nn.Module, weights: dict, path: Path) -> None:
@@ -325,6 +351,7 @@ class Trainer:
                 epoch, offset = divmod(self.step, self.steps_per_epoch)
                 for batch in self._loader(self.train_set, self._batches(epoch, offset)):
                     generator.manual_seed(_noise_seed(config.seed, self.rank, self.step))
+                    batch = self._subsample(batch, generator)
                     with autocast:
                         loss = self.model(batch, generator=generator)
                     self.optimizer.zero_grad(set_to_none=True)
@@ -378,6 +405,7 @@ class Trainer:
         losses, weights = [], []
         for index, batch in enumerate(self._loader(self.val_set, batches)):
             generator.manual_seed(_noise_seed(self.config.seed, _VALIDATION_STREAM, index))
+            batch = self._subsample(batch, generator)
             losses.append(float(policy.compute_loss(batch, generator=generator)))
             weights.append(len(batches[index]))
         policy.train(was_training)

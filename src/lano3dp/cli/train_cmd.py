@@ -42,8 +42,8 @@ def train_command(
     obs_type: ObsType = typer.Option(ObsType.objects, "--obs-type",
                                      help="objects (Lan-o3dp), scene (DP3 baseline) or image (DP baseline)."),
     encoder: Encoder = typer.Option(Encoder.residual, help="Point encoder: residual (paper's best) or mlp (DP3)."),
-    n_points: int | None = typer.Option(None, "--n-points", help="Points per cloud; must match the dataset "
-                                                                 "(default: read from it)."),
+    n_points: int | None = typer.Option(None, "--n-points", help="Points per object cloud to train on (default: "
+                                                                 "all the dataset holds; fewer trains faster)."),
     horizon: int = typer.Option(16, help="Predicted trajectory length H."),
     n_obs_steps: int = typer.Option(2, "--n-obs-steps", help="Observation steps To the policy sees."),
     n_action_steps: int = typer.Option(8, "--n-action-steps", help="Actions Ta executed per chunk."),
@@ -69,10 +69,9 @@ def train_command(
     try:
         overrides = dict(obs_type=obs_type.value, point_encoder=encoder.value, down_dims=down_dims_for(size.value),
                          horizon=horizon, n_obs_steps=n_obs_steps, n_action_steps=n_action_steps)
+        if n_points is not None:
+            overrides["n_points"] = n_points
         policy = policy_config_for_dataset(data, **overrides)
-        if obs_type is ObsType.objects and n_points is not None and n_points != policy.n_points:
-            raise typer.BadParameter(f"{data} holds {policy.n_points} points per object; record the dataset with "
-                                     f"{n_points} points or drop --n-points", param_hint="--n-points")
         config = TrainConfig(data=str(data), out=str(out), policy=policy, steps=steps, batch_size=batch_size, lr=lr,
                              warmup_steps=warmup_steps, val_ratio=val_ratio, val_every=val_every,
                              ckpt_every=ckpt_every, seed=seed, device=device, threads=threads,

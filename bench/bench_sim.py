@@ -111,6 +111,8 @@ def main() -> None:
         started = time.perf_counter()
         results["tasks"][task] = bench_task(task, args.episodes, args.image_size)
         entry = results["tasks"][task]
+        entry["command"] = " ".join(["python", *sys.argv])  # tasks may come from different runs
+        entry["finished_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
         print(f"{task:20s} success {entry['success']:.2f}  {entry['ms_per_step_median']:.2f} ms/step (median wall), "
               f"{entry['cpu_ms_per_step']:.2f} ms CPU  [{time.perf_counter() - started:.0f} s]", flush=True)
         results["meta"] = {"command": " ".join(["python", *sys.argv]), "python": platform.python_version(),

@@ -172,8 +172,12 @@ def test_observations(n: int, seed: int, config: DemoConfig) -> tuple[dict[str, 
 def trained_policy(demo: DemoConfig, training: BenchTrainConfig, out_root: Path, retrain: bool) -> tuple:
     from lano3dp.train import TrainConfig, train
 
-    key = hashlib.sha256(json.dumps([asdict(demo), asdict(training)], sort_keys=True).encode()).hexdigest()[:12]
-    run = out_root / f"guidance_policy_{key}"
+    policy_config = PolicyConfig(object_names=("target",), n_points=demo.n_points, down_dims=training.down_dims)
+    # the key covers the network's parameter names and shapes too, so a change of architecture retrains
+    state = DiffusionPolicy(policy_config).state_dict()
+    architecture = sorted((name, list(value.shape)) for name, value in state.items())
+    key = hashlib.sha256(json.dumps([asdict(demo), asdict(training), architecture], sort_keys=True).encode())
+    run = out_root / f"guidance_policy_{key.hexdigest()[:12]}"
     final = run / "final"
     info_path = run / "bench_train_info.json"
     if final.exists() and info_path.exists() and not retrain:
@@ -181,7 +185,6 @@ def trained_policy(demo: DemoConfig, training: BenchTrainConfig, out_root: Path,
     run.mkdir(parents=True, exist_ok=True)
     data = run / "demos.zarr"
     build_dataset(data, demo)
-    policy_config = PolicyConfig(object_names=("target",), n_points=demo.n_points, down_dims=training.down_dims)
     config = TrainConfig(data=str(data), out=str(run / "train"), policy=policy_config, steps=training.steps,
                          batch_size=training.batch_size, lr=training.lr, warmup_steps=training.warmup_steps,
                          val_ratio=0.05, val_every=max(training.steps // 4, 1), ckpt_every=training.steps,
@@ -285,6 +288,7 @@ def sweep_settings(sweep: SweepConfig) -> list[Setting]:
         *[Setting("ddim", "clean", rho, 100) for rho in paper],
         *[Setting("ddim", "clean", rho, 100, push_weight="alpha_bar") for rho in paper],
         *[Setting("ddim", "clean", rho, 100, "metric+dense", "alpha_bar", clip) for rho in metric],
+        *[Setting("ddim", "clean", rho, 30, "metric+dense", clip_range=clip) for rho in metric],  # last 3 steps
     ]
 
 

@@ -206,8 +206,9 @@ class Trainer:
                 f"{config.data} has {len(self.train_set)} training windows, fewer than one batch of "
                 f"{config.batch_size} x {self.world_size} process(es); lower --batch-size")
 
-        torch.manual_seed(config.seed)  # identical initial weights on every rank
-        self.policy = DiffusionPolicy(policy_config).to(self.device)
+        with torch.random.fork_rng(devices=[]):  # seeded initial weights (identical on every rank), caller's RNG kept
+            torch.manual_seed(config.seed)
+            self.policy = DiffusionPolicy(policy_config).to(self.device)
         if state is None:
             self.policy.fit_normalizer(self.train_set)
         else:

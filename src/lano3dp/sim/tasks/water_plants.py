@@ -4,8 +4,8 @@ Layout: an open watering can (`objects.articulated.add_watering_can`, radius 4.5
 holding 4 "water" spheres (r 1.1 cm, 10 g) on one side of the table and a potted plant
 (`add_plant`: pot radius 6 cm, soil 4 cm deep, visual-only leaves) on the other side, both at
 x in [0.36, 0.56], |y| in [0.11, 0.24], centres at least 0.30 m apart. The can's spout points
-towards the plant within +-0.3 rad. Instance variation: can and pot scaled 0.8 / 1.2
-independently and recoloured.
+towards the plant within +-0.3 rad. Instance variation: the pot scaled 0.8 / 1.2, the can 1.2
+(no small can: its inner finger would land on the water), both recoloured.
 
 Expert (as `bowl_pour`): grasp the can's wall opposite the spout top-down with the fingers
 part-closed, lift to 0.24 m, carry until the spout-side lip is over the pot, tilt 150 degrees
@@ -63,7 +63,10 @@ class WaterPlants(Task):
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         instance = variation.has("instance")
-        can_scale, pot_scale = self.instance_scale(rng, variation), self.instance_scale(rng, variation)
+        # The can has no small variant: in a 0.8x can (3.6 cm radius) the inner finger of the wall grasp
+        # reaches the middle and lands on the 2.2 cm water spheres (15/100 episodes failed).
+        can_scale = 1.2 if instance else 1.0
+        pot_scale = self.instance_scale(rng, variation)
         can_color = str(rng.choice(CAN_COLORS)) if instance else "green"
         pot_color = str(rng.choice(POT_COLORS)) if instance else "orange"
         side = rng.choice([-1.0, 1.0])

@@ -5,8 +5,8 @@ three sides, 12 x 17 cm) with its mouth at x in [0.38, 0.52], |y| in [0.10, 0.16
 the middle of the table; the sweep direction v (from the middle into the pan) is +-y turned by up
 to 0.4 rad. Four dirt cubes (1.6 cm, 4 g) lie in a cluster 10 cm in front of the mouth, spread
 7 cm across v. A push broom (`add_broom`: 12 cm head, 22 cm handle, 60 g) lies flat on the other
-side of the table at any yaw. Instance variation: broom and dustpan scaled 0.8 / 1.2
-independently and recoloured.
+side of the table at any yaw. Instance variation: broom and dustpan scaled 0.8 / 1.2 and
+recoloured, the broom never larger than the dustpan (its head must fit the mouth).
 
 Expert: top-down grasp of the handle at the broom's centre of mass (fingers across the handle,
 tips 2 mm above the table), lift 6 cm, turn and carry the broom until its head is behind the
@@ -62,6 +62,8 @@ class SweepToDustpan(Task):
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         instance = variation.has("instance")
         broom_scale, pan_scale = self.instance_scale(rng, variation), self.instance_scale(rng, variation)
+        if pan_scale < broom_scale:  # a large broom's 14 cm head does not fit a small pan's 12 cm mouth
+            broom_scale = pan_scale
         broom_color = str(rng.choice(BROOM_COLORS)) if instance else "yellow"
         pan_color = str(rng.choice(DUSTPAN_COLORS)) if instance else "blue"
         side = rng.choice([-1.0, 1.0])

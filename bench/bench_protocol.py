@@ -170,7 +170,8 @@ def _parameters(checkpoint: Path) -> int:
 
 
 def _compact(summary: dict) -> dict:
-    keep = ("episodes", "successes", "success_rate", "collision_rate", "safe_success_rate", "mean_min_clearance",
+    keep = ("episodes", "successes", "success_rate", "collision_rate", "mean_collision_steps", "safe_success_rate",
+            "mean_min_clearance",
             "error_rate", "latency_mean_s")
     return {k: summary.get(k) for k in keep}
 
@@ -211,12 +212,14 @@ def markdown_report(results: dict, args: argparse.Namespace) -> str:
                 s = entry["obstacle"][name]
                 clearance = s["mean_min_clearance"]
                 obstacle_rows.append([entry["method"], entry["seed"], label, s["episodes"], percent(s["success_rate"]),
-                                      percent(s["collision_rate"]), percent(s["safe_success_rate"]),
+                                      percent(s["collision_rate"]), s.get("mean_collision_steps"),
+                                      percent(s["safe_success_rate"]),
                                       "–" if clearance is None else f"{100 * clearance:.1f} cm"])
         if obstacle_rows:
             lines += [f"Novel obstacle on the path (rho = {args.rho:g} m per guided step, S = {args.last_steps}):",
                       "", markdown_table(["method", "seed", "sampling", "episodes", "success", "collision",
-                                          "success w/o collision", "mean min clearance"], obstacle_rows), ""]
+                                          "contact steps / episode", "success w/o collision", "mean min clearance"],
+                                         obstacle_rows), ""]
     lines += [f"Wall time: {results.get('wall_s', 0) / 60:.0f} min on {results['machine']['platform']} "
               f"({results['machine']['note']}).", ""]
     return "\n".join(lines)

@@ -14,7 +14,8 @@ from lano3dp.report import markdown_table, plot_rates, plot_top_view, wilson_int
 
 
 def episode(success: bool, collided: bool, clearance: float | None, path: float, latencies, error=None) -> dict:
-    return {"success": success, "collided": collided, "min_clearance": clearance, "path_length": path,
+    return {"success": success, "collided": collided, "n_collision_steps": 3 * int(collided),
+            "min_clearance": clearance, "path_length": path,
             "steps": 100, "chunk_latency_s": list(latencies), "chunk_tries": [1] * len(latencies), "error": error}
 
 
@@ -29,6 +30,7 @@ def test_summary_rates_and_means():
     assert summary["episodes"] == 4 and summary["successes"] == 2
     assert summary["success_rate"] == 0.5
     assert summary["collision_rate"] == 0.5
+    assert summary["mean_collision_steps"] == pytest.approx(1.5)  # 3 steps in each of 2 colliding episodes
     assert summary["safe_success_rate"] == 0.25  # only the first one succeeded without touching
     assert summary["error_rate"] == 0.25 and summary["errors"] == ["ObjectNotFoundError"]
     # clearance is averaged over the episodes that measured one (3 of 4)

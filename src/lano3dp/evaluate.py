@@ -270,6 +270,7 @@ def summarize(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "successes": sum(bool(e["success"]) for e in episodes),
         "success_rate": rate(lambda e: e["success"]),
         "collision_rate": rate(lambda e: e["collided"]),
+        "mean_collision_steps": mean(e["n_collision_steps"] for e in episodes),
         "safe_success_rate": rate(lambda e: e["success"] and not e["collided"]),
         "error_rate": rate(lambda e: e["error"] is not None),
         "mean_min_clearance": mean(clearances),

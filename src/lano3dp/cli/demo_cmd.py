@@ -151,7 +151,7 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         s = result["summary"]
         low, high = wilson_interval(s["successes"], s["episodes"])
         rows.append([name, s["episodes"], f"{percent(s['success_rate'])} ({percent(low)}–{percent(high)})",
-                     percent(s["collision_rate"]), percent(s["safe_success_rate"]),
+                     percent(s["collision_rate"]), s.get("mean_collision_steps"), percent(s["safe_success_rate"]),
                      centimetres(s["mean_min_clearance"]), f"{s['mean_path_length']:.2f} m",
                      f"{1000 * s['latency_mean_s']:.0f} ms" if s["latency_mean_s"] else None])
     plot_rates(out / "rates.png", [(name, r["summary"]) for name, r in results.items()],
@@ -189,7 +189,8 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         "",
         "## Results",
         "",
-        markdown_table(["condition", "episodes", "success (95% CI)", "obstacle contact", "success w/o contact",
+        markdown_table(["condition", "episodes", "success (95% CI)", "obstacle contact", "contact steps / episode",
+                        "success w/o contact",
                         "mean min clearance", "mean path", "latency / chunk"], rows),
         "",
         "![rates](rates.png)",

@@ -12,6 +12,7 @@ Stages (each skipped when its output already exists, so a re-run continues):
 from __future__ import annotations
 
 import json
+import math
 import time
 from pathlib import Path
 
@@ -126,7 +127,7 @@ def run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, 
         log(f"   {name}: {summary_line(results[name]['summary'])}")
 
     log("4/4 writing the report")
-    timings["total_this_run_s"] = round(time.perf_counter() - started, 1)
+    timings.pop("total_this_run_s", None)  # (written by earlier versions) stage times are what add up
     write_json(timings_path, timings)
     report = write_demo_report(out, task=task, checkpoint=Path(checkpoint), results=results, timings=timings,
                                command=command, rho=rho, last_steps=last_steps)
@@ -137,12 +138,18 @@ def run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, 
 def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, timings: dict, command: str,
                       rho: float, last_steps: int) -> Path:
     """report.md + rates.png + top_view.png from the evaluation results."""
+    from safetensors import safe_open
+
     from lano3dp.data.store import EpisodeStore
-    from lano3dp.policy import DiffusionPolicy
+    from lano3dp.policy.modeling import load_config
     from lano3dp.report import centimetres, markdown_table, percent, plot_rates, plot_top_view, wilson_interval
 
-    policy = DiffusionPolicy.from_pretrained(checkpoint)
-    parameters = sum(p.numel() for p in policy.parameters())
+    # the report reads the checkpoint's files rather than rebuilding the model, so it can be re-made for any
+    # checkpoint the evaluations used, even one an older version of the code wrote
+    policy_config = load_config(checkpoint / "config.json")
+    with safe_open(str(checkpoint / "model.safetensors"), "pt") as weights:
+        parameters = sum(math.prod(weights.get_slice(name).get_shape())
+                         for name in weights.keys() if not name.startswith("normalizer."))
     train_config = json.loads((checkpoint / "train_config.json").read_text())
     store = EpisodeStore.open(train_config["data"])
 
@@ -168,7 +175,9 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
                   objects=pick[0].get("targets") or {}, title=f"{task}, novel obstacle: executed EE path, top view")
     videos = [e.get("video") for r in results.values() for e in r["episodes"] if e.get("video")]
 
+    # a stage skipped on a re-run keeps the time it took when it ran, so the sum is the time of a fresh run
     timing_rows = [[k.removesuffix("_s").replace("_", " "), f"{v:.0f} s"] for k, v in timings.items()]
+    timing_rows.append(["**all stages**", f"{sum(timings.values()) / 60:.1f} min"])
     lines = [
         f"# lano3dp demo: {task}",
         "",
@@ -181,11 +190,11 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         f"metric push on the densified path, S = {last_steps}; the obstacle is segmented, fitted with a vertical "
         "cylinder, and Q* = its radius + the held object's extent + 2 cm).",
         "",
-        f"Policy: {parameters / 1e6:.2f} M parameters, UNet {tuple(policy.config.down_dims)}, "
-        f"{policy.config.n_points} points per object, obs {policy.config.n_obs_steps} steps, horizon "
-        f"{policy.config.horizon}, {policy.config.n_action_steps} actions per chunk; trained "
+        f"Policy: {parameters / 1e6:.2f} M parameters, UNet {tuple(policy_config.down_dims)}, "
+        f"{policy_config.n_points} points per object, obs {policy_config.n_obs_steps} steps, horizon "
+        f"{policy_config.horizon}, {policy_config.n_action_steps} actions per chunk; trained "
         f"{train_config['steps']} steps at batch {train_config['batch_size']}, lr {train_config['lr']:g}; "
-        f"sampling {policy.config.inference_scheduler.upper()}-{policy.config.num_inference_steps}.",
+        f"sampling {policy_config.inference_scheduler.upper()}-{policy_config.num_inference_steps}.",
         "",
         "## Results",
         "",

@@ -79,14 +79,18 @@ def run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, 
     timings = json.loads(timings_path.read_text()) if timings_path.exists() else {}
     started = time.perf_counter()
 
+    skipped = []  # stages (pipeline.*_stage) say "...; skipping" when their output is already there
+
     def log(message: str) -> None:
+        if message.endswith("skipping"):
+            skipped.append(message)
         console.print(f"[cyan]{time.perf_counter() - started:6.0f}s[/cyan] {message}")
 
     def timed(name: str, function):
-        began = time.perf_counter()
+        began, before = time.perf_counter(), len(skipped)
         value = function()
         elapsed = time.perf_counter() - began
-        if elapsed > 1.0 or name not in timings:  # a skipped stage keeps the time it took when it ran
+        if len(skipped) == before or name not in timings:  # a skipped stage keeps the time it took when it ran
             timings[name] = round(elapsed, 1)
         write_json(timings_path, timings)
         return value

@@ -179,6 +179,14 @@ def test_fit_cylinder_covers_every_point_by_default():
     assert (cylinder.clearance(torch.tensor(cloud[None])) <= 1e-9).all()
 
 
+def test_fit_cylinder_to_a_flat_top_seen_from_above():
+    angle = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    top = np.column_stack([0.5 + 0.03 * np.cos(angle), 0.03 * np.sin(angle), np.full(60, 0.2)])
+    cylinder = fit_cylinder(top, xy_only=False)
+    np.testing.assert_allclose(cylinder.center.numpy(), [0.5, 0.0], atol=1e-6)
+    assert cylinder.z_min < 0.2 < cylinder.z_max and cylinder.z_max - cylinder.z_min == pytest.approx(0.002)
+
+
 def test_fit_box_recovers_yaw_extents_and_centre():
     rng = np.random.default_rng(2)
     half = np.array([0.08, 0.03, 0.05])

@@ -62,7 +62,9 @@ def fit_cylinder(points, *, min_points: int = 10, held_radius: float = 0.0, marg
         center = circle[0]
     radius = float(np.quantile(np.linalg.norm(xy - center, axis=1), coverage))
     radius = max(radius, 1e-3)  # a single column of points still has some size
-    return Cylinder(center.tolist(), radius, z_min=float(points[:, 2].min()), z_max=float(points[:, 2].max()),
+    # A camera that sees only a flat top gives no height; as in fit_box, keep at least 2 mm.
+    z_mid, z_half = (points[:, 2].max() + points[:, 2].min()) / 2, max(np.ptp(points[:, 2]) / 2, 1e-3)
+    return Cylinder(center.tolist(), radius, z_min=float(z_mid - z_half), z_max=float(z_mid + z_half),
                     xy_only=xy_only, held_radius=held_radius, margin=margin)
 
 

@@ -209,6 +209,18 @@ def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(obser
     assert fixed.held_radius == 0.05
 
 
+def test_a_phrase_naming_several_obstacles_fits_one_cylinder_each(observer):
+    mugs = [Box(f"mug_{i}", (0.02, y), (0.05, 0.05, 0.10), {"kind": "mug", "color": "white", "role": "obstacle"})
+            for i, y in enumerate((-0.12, 0.12))]
+    env = FakeEnv([BOWL, PAN, *mugs])
+    obs, _ = env.reset(seed=0)
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(), obstacle_phrases=["mug"])
+    runner.push(*observe(env, obs))
+    centres = sorted(float(c.center[1]) for c in runner.obstacles)
+    assert len(centres) == 2  # "avoid the mugs": never merged into one cloud, never ambiguous
+    np.testing.assert_allclose(centres, [-0.12, 0.12], atol=0.015)
+
+
 def test_the_cost_can_be_densified_and_pushed_isotropically_in_metres(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     obs, _ = env.reset(seed=0)

@@ -390,7 +390,8 @@ class PolicyRunner:
     def fit_obstacles(self, frame: RGBDFrame) -> PositionCost:
         """Segment every obstacle phrase in `frame` and fit its cost (see ObstacleModel)."""
         self.held_radius = self.measure_held_radius(frame)
-        clouds = self.observer.observe(frame, self.obstacle_phrases)
+        # Every matching instance is its own obstacle: "avoid the mugs" fits one cylinder per mug.
+        clouds = self.observer.observe_instances(frame, self.obstacle_phrases)
         costs = [self.config.obstacle.fit(points, self.held_radius) for points in clouds.points]
         self.obstacles = ObstacleSet(costs)
         cost: PositionCost = self.obstacles

@@ -98,6 +98,20 @@ def test_a_writer_killed_mid_append_leaves_earlier_episodes_readable(tmp_path):
     assert EpisodeStore.open(path).n_steps == committed * 400 + 2
 
 
+def test_an_end_entry_grown_but_never_written_is_not_an_episode(tmp_path):
+    """The torn state a kill between growing meta/episode_ends and writing its value leaves."""
+    import zarr
+
+    path = tmp_path / "d.zarr"
+    store = EpisodeStore.create(path)
+    store.append_episode(make_episode(0, 3))
+    zarr.open_group(str(path), mode="r+")["meta/episode_ends"].resize((2,))
+    store = EpisodeStore.open(path, mode="r+")
+    assert store.n_episodes == 1 and store.n_steps == 3
+    store.append_episode(make_episode(1, 4))
+    assert EpisodeStore.open(path).episode_ends.tolist() == [3, 7]
+
+
 def test_a_damaged_store_names_the_file(tmp_path):
     path = tmp_path / "d.zarr"
     store = EpisodeStore.create(path)

@@ -6,8 +6,8 @@
 
 Appending is crash-safe: zarr's local store writes every chunk atomically (temp file +
 rename), and `meta/episode_ends` is written last, so it is the commit point. Rows past
-the last episode end (an append cut short) are invisible to readers and are truncated
-by the next append.
+the last episode end (an append cut short), and an end entry whose value was never
+written, are invisible to readers and are overwritten by the next append.
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ FORMAT_VERSION = 1
 # Aim for chunks of about this many bytes along the time axis: large enough for fast
 # reads, small enough that an append rewrites little.
 _TARGET_CHUNK_BYTES = 2 << 20
+_UNCOMMITTED_END = 0  # fill value of meta/episode_ends
 
 
 class DatasetSchemaError(Lano3dpError, ValueError):
@@ -55,7 +56,12 @@ class EpisodeStore:
     def __init__(self, root: zarr.Group, path: Path):
         self._root = root
         self.path = path
-        self._episode_ends = np.asarray(root["meta/episode_ends"][:], dtype=np.int64)
+        ends = np.asarray(root["meta/episode_ends"][:], dtype=np.int64)
+        # Growing meta/episode_ends writes its new shape before its new value, so an append killed in
+        # between leaves one trailing fill value (0). No episode ends at 0: that entry was never committed.
+        if len(ends) and ends[-1] == _UNCOMMITTED_END:
+            ends = ends[:-1]
+        self._episode_ends = ends
 
     # ---- construction -------------------------------------------------------------------
     @classmethod
@@ -66,7 +72,7 @@ class EpisodeStore:
         root = zarr.open_group(str(path), mode="w")
         root.create_group("data")
         meta = root.create_group("meta")
-        meta.create_array("episode_ends", shape=(0,), chunks=(4096,), dtype="int64")
+        meta.create_array("episode_ends", shape=(0,), chunks=(4096,), dtype="int64", fill_value=_UNCOMMITTED_END)
         root.attrs.update(
             _to_jsonable(
                 {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "versions": library_versions()}

@@ -26,8 +26,11 @@ def test_summary_rates_and_means():
         episode(False, False, None, 0.8, [0.3], error="ObjectNotFoundError: object 'pan' was not found"),
         episode(False, True, 0.0, 1.0, []),
     ]
+    for record, obstacles in zip(episodes, ([{"shape": "Cylinder"}], [{"shape": "Cylinder"}], [], []), strict=True):
+        record["obstacles"] = obstacles
     summary = summarize(episodes)
     assert summary["episodes"] == 4 and summary["successes"] == 2
+    assert summary["episodes_with_obstacles"] == 2  # a layout with no room for one is not hidden
     assert summary["success_rate"] == 0.5
     assert summary["collision_rate"] == 0.5
     assert summary["mean_collision_steps"] == pytest.approx(1.5)  # 3 steps in each of 2 colliding episodes

@@ -268,6 +268,9 @@ def summarize(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
     return {
         "episodes": n,
         "successes": sum(bool(e["success"]) for e in episodes),
+        # The obstacle variation skips an obstacle where a layout leaves no room on the path: count
+        # the episodes that really had one, so a collision rate is read against them.
+        "episodes_with_obstacles": sum(bool(e.get("obstacles")) for e in episodes),
         "success_rate": rate(lambda e: e["success"]),
         "collision_rate": rate(lambda e: e["collided"]),
         "mean_collision_steps": mean(e["n_collision_steps"] for e in episodes),

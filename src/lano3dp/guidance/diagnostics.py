@@ -141,18 +141,8 @@ def plot_denoising(steps: Sequence[RecordedStep], obstacles, path: str | Path, *
                            | (xy[:, 1] > ylim[1])).sum())
             label = f"{name}, k={step.timestep + 1}" + (" (guided)" if step.guided else "")
             ax.set_title(label + (f"\n{outside} pts out of view" if outside else "\n"), fontsize=8)
-            ax.set_xlim(*xlim)
-            ax.set_ylim(*ylim)
-            ax.set_aspect("equal")
-            ax.tick_params(labelsize=6)
-    if title:
-        fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return path
+            _top_view_axes(ax, xlim, ylim)
+    return _save_figure(fig, path, title)
 
 
 def plot_trajectories_by_scale(trajectories: Mapping[float | str, np.ndarray], obstacles, path: str | Path, *,
@@ -192,10 +182,20 @@ def plot_trajectories_by_scale(trajectories: Mapping[float | str, np.ndarray], o
         name = f"rho = {scale:g}" if isinstance(scale, (int, float)) else str(scale)
         ax.set_title(f"{name}\ncolliding: {rate:.0%} of {len(batch)}" + (f", {outside} pts out of view" if outside
                                                                          else ""), fontsize=8)
-        ax.set_xlim(*xlim)
-        ax.set_ylim(*ylim)
-        ax.set_aspect("equal")
-        ax.tick_params(labelsize=6)
+        _top_view_axes(ax, xlim, ylim)
+    return _save_figure(fig, path, title)
+
+
+def _top_view_axes(ax, xlim, ylim) -> None:
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
+    ax.set_aspect("equal")
+    ax.tick_params(labelsize=6)
+
+
+def _save_figure(fig, path: str | Path, title: str) -> Path:
+    import matplotlib.pyplot as plt
+
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()

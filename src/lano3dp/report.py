@@ -67,13 +67,17 @@ def plot_top_view(path: str | Path, runs: Sequence[tuple[str, np.ndarray]], *,
     ax.set_title(title, fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="best")
+    return _save_figure(plt, fig, path)
+
+
+
+def _save_figure(plt, fig, path: str | Path) -> Path:
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     plt.close(fig)
     return path
-
 
 def plot_rates(path: str | Path, conditions: Sequence[tuple[str, Mapping[str, Any]]], *,
                title: str = "closed-loop evaluation") -> Path:
@@ -95,12 +99,7 @@ def plot_rates(path: str | Path, conditions: Sequence[tuple[str, Mapping[str, An
     ax.set_ylabel("rate over episodes")
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=7, ncols=3, loc="upper center")
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save_figure(plt, fig, path)
 
 
 def markdown_table(headers: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:

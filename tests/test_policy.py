@@ -297,6 +297,23 @@ def test_weights_from_another_architecture_are_a_corrupt_file_error(tmp_path):
         DiffusionPolicy.from_pretrained(tmp_path / "ckpt")
 
 
+def test_checkpoint_from_a_newer_format_is_refused_and_unversioned_ones_load(tmp_path):
+    from safetensors.torch import load_file, save_file
+
+    from lano3dp.errors import IncompatibleFormatError
+    from lano3dp.policy.modeling import CHECKPOINT_FORMAT_VERSION
+
+    make_policy().save_pretrained(tmp_path / "ckpt")
+    weights = tmp_path / "ckpt" / "model.safetensors"
+    state = load_file(str(weights))
+    save_file(state, str(weights), metadata={"format": "lano3dp-policy"})  # as written before versions existed
+    DiffusionPolicy.from_pretrained(tmp_path / "ckpt")
+    newer = str(CHECKPOINT_FORMAT_VERSION + 1)
+    save_file(state, str(weights), metadata={"format": "lano3dp-policy", "format_version": newer})
+    with pytest.raises(IncompatibleFormatError, match=f"format version {newer}.*upgrade lano3dp"):
+        DiffusionPolicy.from_pretrained(tmp_path / "ckpt")
+
+
 def test_missing_checkpoint_is_file_not_found(tmp_path):
     with pytest.raises(FileNotFoundError, match="no policy checkpoint"):
         DiffusionPolicy.from_pretrained(tmp_path)

@@ -19,7 +19,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from lano3dp.errors import CorruptFileError
+from lano3dp.errors import CorruptFileError, IncompatibleFormatError
 from lano3dp.policy.config import PolicyConfig
 from lano3dp.policy.encoders import ObservationEncoder
 from lano3dp.policy.normalizer import LinearNormalizer
@@ -28,6 +28,9 @@ from lano3dp.policy.unet import ConditionalUnet1D
 CONFIG_NAME = "config.json"
 WEIGHTS_NAME = "model.safetensors"
 NORMALIZER_NAME = "normalizer.json"
+# Bump when a saved checkpoint's meaning changes (keys, normalisation, action layout); loading refuses
+# newer versions instead of producing silently wrong actions. Files without the field are version 1.
+CHECKPOINT_FORMAT_VERSION = 1
 
 PositionCost = Callable[[torch.Tensor], torch.Tensor]
 
@@ -220,7 +223,8 @@ class DiffusionPolicy(nn.Module):
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         state = {key: value.detach().cpu().contiguous() for key, value in self.state_dict().items()}
-        save_file(state, str(directory / WEIGHTS_NAME), metadata={"format": "lano3dp-policy"})
+        save_file(state, str(directory / WEIGHTS_NAME),
+                  metadata={"format": "lano3dp-policy", "format_version": str(CHECKPOINT_FORMAT_VERSION)})
         stats = {key: {name: value.tolist() for name, value in item.items()}
                  for key, item in self.normalizer_stats().items()}
         _write_text(directory / NORMALIZER_NAME, json.dumps(stats, indent=2))
@@ -236,6 +240,7 @@ class DiffusionPolicy(nn.Module):
             CorruptFileError: config.json or model.safetensors is truncated, unparsable or inconsistent.
         """
         directory = resolve_checkpoint(directory)
+        check_format_version(directory / WEIGHTS_NAME)
         config = load_config(directory / CONFIG_NAME)
         policy = cls(config)
         state = load_safetensors(directory / WEIGHTS_NAME)
@@ -264,6 +269,23 @@ def resolve_checkpoint(directory: str | Path) -> Path:
         return last.resolve()
     raise FileNotFoundError(f"no policy checkpoint in {directory} (expected {CONFIG_NAME} and {WEIGHTS_NAME}, "
                             "or checkpoints/last of a training run)")
+
+
+def check_format_version(path: Path) -> int:
+    """The checkpoint format version in the weights' metadata; raise if this release cannot read it."""
+    from safetensors import safe_open
+
+    if not path.exists():
+        raise FileNotFoundError(f"{path} does not exist")
+    try:
+        with safe_open(str(path), framework="pt") as handle:
+            metadata = handle.metadata() or {}
+        version = int(metadata.get("format_version", 1))
+    except Exception as error:  # a damaged header raises SafetensorError / ValueError
+        raise CorruptFileError(path, f"unreadable safetensors header ({type(error).__name__}: {error})") from error
+    if version > CHECKPOINT_FORMAT_VERSION:
+        raise IncompatibleFormatError(path, version, CHECKPOINT_FORMAT_VERSION)
+    return version
 
 
 def load_config(path: Path) -> PolicyConfig:

@@ -233,9 +233,8 @@ class Setting:
 def make_cost(kind: str, obstacle: Cylinder, policy: DiffusionPolicy):
     if kind == "paper":
         return obstacle
-    stats = policy.normalizer_stats()["action"]
     base = Densified(obstacle, 4) if kind == "metric+dense" else obstacle
-    return MetricGradient.from_stats(base, stats["min"], stats["max"])
+    return MetricGradient(base, policy.normalizer.scale("action")[:3])
 
 
 def sample(policy, obs, setting: Setting, cost, seed: int):

@@ -104,6 +104,19 @@ def test_normalizer_maps_the_fitted_range_to_minus_one_one_and_back():
     assert np.allclose(normalizer.stats()["action"]["min"], data.min(0))
 
 
+def test_normalizer_keeps_a_nearly_constant_dimension_at_a_sane_scale():
+    # Roll/pitch components of yaw-only demonstrations vary by ~5e-4; a closed-loop hand tilts ~1 cm.
+    rng = np.random.default_rng(2)
+    data = np.stack([rng.uniform(0.2, 0.5, 400), rng.uniform(-2.5e-4, 2.5e-4, 400)], axis=1).astype(np.float32)
+    normalizer = LinearNormalizer({"state": 2})
+    normalizer.fit({"state": data})
+    tilted = normalizer.normalize("state", torch.tensor([[0.35, 0.01]]))
+    assert abs(float(tilted[0, 1])) <= 1.0  # inside the training range's scale, not +-40
+    assert abs(float(tilted[0, 1])) > 0.1  # yet not flattened: the tilt is still visible
+    back = normalizer.unnormalize("state", normalizer.normalize("state", torch.from_numpy(data)))
+    assert torch.allclose(back, torch.from_numpy(data), atol=1e-6)
+
+
 def test_normalizer_clouds_share_one_xyz_range_across_slots_and_points():
     clouds = np.zeros((10, 2, 5, 3), np.float32)
     clouds[:, 0] = [0.0, 0.0, 0.0]

@@ -398,8 +398,7 @@ class PolicyRunner:
         if self.config.densify > 1:
             cost = Densified(cost, self.config.densify)
         if self.config.metric_gradient:
-            stats = self.policy.normalizer_stats()["action"]
-            cost = MetricGradient.from_stats(cost, stats["min"], stats["max"])
+            cost = MetricGradient(cost, self.policy.normalizer.scale("action")[:3])
         return cost
 
     # ---- acting ----------------------------------------------------------------------------

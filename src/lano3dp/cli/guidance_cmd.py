@@ -63,16 +63,16 @@ def guidance_figures(
     mode = GuidanceMode(mode)
 
     if analytic:
-        sample_chunk, to_metric, label, action_range = _analytic_sampler(obstacle_cost, scheduler, steps, samples)
+        sample_chunk, to_metric, label, action_scale = _analytic_sampler(obstacle_cost, scheduler, steps, samples)
     else:
         if checkpoint is None or data is None:
             raise typer.BadParameter("give --checkpoint and --data, or --analytic")
-        sample_chunk, to_metric, label, action_range = _policy_sampler(checkpoint, data, episode, step, scheduler,
+        sample_chunk, to_metric, label, action_scale = _policy_sampler(checkpoint, data, episode, step, scheduler,
                                                                        steps, samples)
     cost = obstacle_cost
     if cost_kind != "paper":
-        cost = MetricGradient.from_stats(Densified(obstacle_cost, 4) if cost_kind == "metric+dense" else obstacle_cost,
-                                         *action_range)
+        cost = MetricGradient(Densified(obstacle_cost, 4) if cost_kind == "metric+dense" else obstacle_cost,
+                              action_scale)
 
     def config(guide_mode, scale):
         return GuidanceConfig(guide_mode, scale, last_steps, push_weight=push_weight, guided_clip_range=clip_range)
@@ -108,8 +108,7 @@ def _policy_sampler(checkpoint, data, episode, step, scheduler, steps, samples):
                                             num_inference_steps=steps, generator=generator, on_step=on_step)
         return chunk.trajectory[..., :3].numpy()
 
-    stats = policy.normalizer_stats()["action"]
-    return sample_chunk, to_metric, f"{Path(checkpoint).name} ({scheduler})", (stats["min"], stats["max"])
+    return sample_chunk, to_metric, f"{Path(checkpoint).name} ({scheduler})", policy.normalizer.scale("action")[:3]
 
 
 def _analytic_sampler(cost, scheduler_kind, steps, samples):
@@ -128,4 +127,4 @@ def _analytic_sampler(cost, scheduler_kind, steps, samples):
         return denoise(prior, scheduler, (samples, config.horizon, 3), num_inference_steps=steps, generator=generator,
                        guidance=guidance, cost_fn=cost, on_step=on_step).numpy()
 
-    return sample_chunk, None, f"analytic prior ({scheduler_kind})", ([-1.0] * 3, [1.0] * 3)  # identity normaliser
+    return sample_chunk, None, f"analytic prior ({scheduler_kind})", [1.0] * 3  # identity normaliser

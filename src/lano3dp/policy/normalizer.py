@@ -15,7 +15,12 @@ import numpy as np
 import torch
 from torch import nn
 
-RANGE_EPS = 1e-4  # a dimension whose range is below this is constant: it maps to 0, as in DP
+# Every key is in metres or unit-scale quantities (rotation components, gripper opening), so one floor
+# serves all. Diffusion Policy only special-cases exactly constant dimensions (range < 1e-4); a nearly
+# constant one, like the roll/pitch components of a yaw-only demonstration (range ~5e-4), then gets a
+# scale of thousands, and the 1 cm of tilt a closed-loop hand picks up becomes an input of +-40 that
+# the policy never saw: measured here, it turned smooth chunks into 10 cm jumps per step.
+MIN_SPAN = 0.05
 
 
 class NormalizerNotFittedError(RuntimeError):
@@ -23,7 +28,7 @@ class NormalizerNotFittedError(RuntimeError):
 
 
 class LinearNormalizer(nn.Module):
-    """Per-key affine map x -> x * scale + offset taking [min, max] to [-1, 1].
+    """Per-key affine map x -> x * scale + offset taking [min, max] to [-1, 1] (spans below MIN_SPAN widened).
 
     Args:
         dims: key -> size of the last axis (e.g. {"action": 10, "state": 11, "object_clouds": 3}).
@@ -60,10 +65,9 @@ class LinearNormalizer(nn.Module):
                                  f"expected {tuple(expected)}")
             if not (torch.isfinite(low).all() and torch.isfinite(high).all()) or bool((high < low).any()):
                 raise ValueError(f"{key}: statistics must be finite with max >= min")
-            span = high - low
-            constant = span < RANGE_EPS
-            scale = torch.where(constant, torch.ones_like(span), 2.0 / span.clamp_min(RANGE_EPS))
-            offset = torch.where(constant, -low, -1.0 - scale * low)
+            # [min, max] -> [-1, 1]; a span below MIN_SPAN is widened about its midpoint instead.
+            scale = 2.0 / (high - low).clamp_min(MIN_SPAN)
+            offset = -scale * (low + high) / 2.0
             for name, value in (("min", low), ("max", high), ("scale", scale), ("offset", offset)):
                 self._get(key, name).copy_(value)
         self.fitted.fill_(True)
@@ -84,6 +88,11 @@ class LinearNormalizer(nn.Module):
         """{key: {"min": (D,), "max": (D,)}} as numpy arrays."""
         return {key: {name: self._get(key, name).detach().cpu().numpy().copy() for name in ("min", "max")}
                 for key in self.keys}
+
+    def scale(self, key: str) -> np.ndarray:
+        """(D,) the map's slope per dimension (1 / unit): d normalised / d raw."""
+        self._check()
+        return self._get(key, "scale").detach().cpu().numpy().copy()
 
     def _check(self) -> None:
         if not bool(self.fitted):

@@ -66,6 +66,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--obstacle-episodes", type=int, default=None, help="episodes of the obstacle test "
                                                                             "(default: --episodes)")
     parser.add_argument("--rho", type=float, default=DEFAULT_RHO, help="guidance scale (metres per guided step)")
+    parser.add_argument("--rho-sweep", default="0.01,0.02", help="further guidance scales of the obstacle test, "
+                                                                 "for its success/collision trade-off ('' none)")
     parser.add_argument("--last-steps", type=int, default=DEFAULT_LAST_STEPS, help="guidance S")
     parser.add_argument("--batch-size", type=int, default=64)
     parser.add_argument("--lr", type=float, default=1e-3)
@@ -75,6 +77,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--work", default=str(ROOT / "bench" / "out" / "protocol"), help="datasets, runs, evals")
     parser.add_argument("--tag", default="", help="suffix of results/protocol<tag>.json|md")
     parser.add_argument("--note", default="", help="a line printed under the table's title (e.g. 'reduced run')")
+    parser.add_argument("--report-only", action="store_true",
+                        help="train and evaluate nothing: tabulate what the work folder holds (runs made by several "
+                             "processes, e.g. one per task); what is missing is marked 'not run'")
     return parser.parse_args(argv)
 
 
@@ -107,8 +112,9 @@ def main(argv=None) -> int:
     out_md = ROOT / "results" / f"protocol{args.tag}.md"
 
     for task in tasks:
-        data = collect_stage(task, args.demos, work / "data" / f"{task}_n{args.points}.zarr", log=log,
-                             progress=False, n_points=args.points)
+        data = work / "data" / f"{task}_n{args.points}.zarr"
+        if not args.report_only:
+            collect_stage(task, args.demos, data, log=log, progress=False, n_points=args.points)
         task_result = results["tasks"].setdefault(task, {})
         for method in methods:
             for seed in seeds:
@@ -131,17 +137,25 @@ def run_method(task: str, method: str, seed: int, data: Path, work: Path, args: 
 
     key = f"{task} {method}/seed{seed}"
     run = work / "runs" / task / method / f"seed{seed}"
-    policy = policy_config_for_dataset(data, obs_type=method, down_dims=down_dims_for(args.model))
-    log(f"{key}: train {args.steps} steps")
-    train_stage(data, run, policy_config=policy, steps=args.steps, batch_size=args.batch_size, lr=args.lr,
-                ckpt_every=args.eval_every, seed=seed, log=log, progress=False)
-    checkpoints = [(step, path) for step, path in list_checkpoints(run / "checkpoints") if step <= args.steps]
+    if not args.report_only:
+        policy = policy_config_for_dataset(data, obs_type=method, down_dims=down_dims_for(args.model))
+        log(f"{key}: train {args.steps} steps")
+        train_stage(data, run, policy_config=policy, steps=args.steps, batch_size=args.batch_size, lr=args.lr,
+                    ckpt_every=args.eval_every, seed=seed, log=log, progress=False)
+    checkpoints = [(step, path) for step, path in list_checkpoints(run / "checkpoints") if step <= args.steps] \
+        if (run / "checkpoints").is_dir() else []
+    if not checkpoints or checkpoints[-1][0] != args.steps:
+        log(f"{key}: not trained to {args.steps} steps; marked not run")
+        return {"method": METHODS[method], "seed": seed, "not_run": True}
     evals = work / "evals" / task / method / f"seed{seed}"
 
-    def evaluate(checkpoint: Path, variation: str, name: str, guidance: str = "none", episodes=None) -> dict:
+    def evaluate(checkpoint: Path, variation: str, name: str, guidance: str = "none", episodes=None,
+                 rho: float | None = None) -> dict | None:
         config = EvalConfig(checkpoint=str(checkpoint), task=task, variation=variation,
-                            episodes=episodes or args.episodes, guidance=guidance, rho=args.rho,
+                            episodes=episodes or args.episodes, guidance=guidance, rho=args.rho if rho is None else rho,
                             last_steps=args.last_steps, workers=args.workers, out=str(evals / f"{name}.json"))
+        if args.report_only and not is_up_to_date(config):
+            return None
         summary = eval_stage(config, log=log, command=command)["summary"]
         cells = summary_cells(summary)
         log(f"{key} {name}: success {cells[0]} ({cells[1]}), collisions {percent(summary['collision_rate'])}")
@@ -150,7 +164,10 @@ def run_method(task: str, method: str, seed: int, data: Path, work: Path, args: 
     entry = {"method": METHODS[method], "seed": seed, "run": str(run), "parameters": _parameters(checkpoints[-1][1]),
              "steps": args.steps, "curve": []}
     for step, checkpoint in checkpoints:
-        entry["curve"].append({"step": step, **evaluate(checkpoint, "clean", f"clean_step{step:07d}")})
+        if (point := evaluate(checkpoint, "clean", f"clean_step{step:07d}")) is not None:
+            entry["curve"].append({"step": step, **point})
+    if not entry["curve"] or entry["curve"][-1]["step"] != args.steps:
+        return {"method": METHODS[method], "seed": seed, "not_run": True}
     rates = sorted((point["success_rate"] for point in entry["curve"]), reverse=True)
     entry["paper_best_k"] = float(np.mean(rates[: args.best_k]))
     entry["best_k_used"] = min(args.best_k, len(rates))
@@ -161,7 +178,27 @@ def run_method(task: str, method: str, seed: int, data: Path, work: Path, args: 
         n = args.obstacle_episodes or args.episodes
         entry["obstacle"] = {"no_guidance": evaluate(final, "obstacle", "obstacle_none", "none", n),
                              "guidance": evaluate(final, "obstacle", "obstacle_clean", "clean", n)}
+        entry["obstacle_sweep"] = {f"{rho:g}": evaluate(final, "obstacle", f"obstacle_clean_rho{rho:g}", "clean",
+                                                        n, rho)
+                                   for rho in _floats(args.rho_sweep) if rho != args.rho}
     return entry
+
+
+def _rate(summary: dict | None) -> str:
+    return "not run" if summary is None else percent(summary["success_rate"])
+
+
+def is_up_to_date(config: EvalConfig) -> bool:
+    """Whether config.out holds results of exactly this configuration (what eval_stage would skip)."""
+    import json
+    from dataclasses import asdict
+
+    path = Path(config.out)
+    return path.exists() and json.loads(path.read_text()).get("config") == json.loads(json.dumps(asdict(config)))
+
+
+def _floats(text: str) -> list[float]:
+    return [float(item) for item in text.split(",") if item]
 
 
 def _parameters(checkpoint: Path) -> int:
@@ -171,7 +208,8 @@ def _parameters(checkpoint: Path) -> int:
 
 
 def _compact(summary: dict) -> dict:
-    keep = ("episodes", "successes", "success_rate", "collision_rate", "mean_collision_steps", "safe_success_rate",
+    keep = ("episodes", "episodes_with_obstacles", "successes", "success_rate", "collision_rate",
+            "mean_collision_steps", "safe_success_rate",
             "mean_min_clearance",
             "error_rate", "latency_mean_s")
     return {k: summary.get(k) for k in keep}
@@ -190,39 +228,56 @@ def markdown_report(results: dict, args: argparse.Namespace) -> str:
     for task, entries in results["tasks"].items():
         lines += [f"## {task}", ""]
         rows = []
+        variation_names = args.variations.split(",") if args.variations else []
         for entry in entries.values():
+            if entry.get("not_run"):
+                rows.append([entry["method"], entry["seed"], "–", "–", "not run", "not run",
+                             *("not run" for _ in variation_names)])
+                continue
             final = entry["final"]
             low, high = wilson_interval(final["successes"], final["episodes"])
             rows.append([entry["method"], entry["seed"], f"{entry['parameters'] / 1e6:.2f} M", entry["steps"],
                          f"{percent(entry['paper_best_k'])} (best {entry['best_k_used']})",
                          f"{percent(final['success_rate'])} ({percent(low)}–{percent(high)})",
-                         *(percent(entry["variations"][v]["success_rate"]) for v in entry["variations"])])
-        variation_names = list(next(iter(entries.values()))["variations"]) if entries else []
+                         *(_rate(entry["variations"].get(v)) for v in variation_names)])
         lines += [markdown_table(["method", "seed", "params", "steps", "paper: best-k clean", "final clean",
                                   *variation_names], rows), ""]
         curve_rows = [[entry["method"], entry["seed"],
                        ", ".join(f"{p['step']}: {percent(p['success_rate'])}" for p in entry["curve"])]
-                      for entry in entries.values()]
+                      for entry in entries.values() if not entry.get("not_run")]
         lines += ["Success along training (clean):", "", markdown_table(["method", "seed", "step: success"],
                                                                         curve_rows), ""]
         obstacle_rows = []
         for entry in entries.values():
             if "obstacle" not in entry:
                 continue
-            for name, label in (("no_guidance", "no guidance"), ("guidance", "guidance A_0|k")):
-                s = entry["obstacle"][name]
+            runs = [("no guidance", entry["obstacle"]["no_guidance"]),
+                    (f"guidance A_0|k, rho {args.rho:g}", entry["obstacle"]["guidance"]),
+                    *((f"guidance A_0|k, rho {rho}", s) for rho, s in entry.get("obstacle_sweep", {}).items())]
+            for label, s in runs:
+                if s is None:
+                    obstacle_rows.append([entry["method"], entry["seed"], label, "not run", *["–"] * 6])
+                    continue
                 clearance = s["mean_min_clearance"]
-                obstacle_rows.append([entry["method"], entry["seed"], label, s["episodes"], percent(s["success_rate"]),
+                obstacle_rows.append([entry["method"], entry["seed"], label, s["episodes"],
+                                      s.get("episodes_with_obstacles", "–"), percent(s["success_rate"]),
                                       percent(s["collision_rate"]), s.get("mean_collision_steps"),
                                       percent(s["safe_success_rate"]),
                                       "–" if clearance is None else f"{100 * clearance:.1f} cm"])
         if obstacle_rows:
-            lines += [f"Novel obstacle on the path (rho = {args.rho:g} m per guided step, S = {args.last_steps}):",
-                      "", markdown_table(["method", "seed", "sampling", "episodes", "success", "collision",
+            lines += [f"Novel obstacle on the path (rho in m per guided step, S = {args.last_steps}). Collision = "
+                      "share of all episodes with any contact with the obstacle; an episode where no obstacle fits "
+                      "the path is run without one.",
+                      "", markdown_table(["method", "seed", "sampling", "episodes", "with an obstacle placed",
+                                          "success", "collision",
                                           "contact steps / episode", "success w/o collision", "mean min clearance"],
                                          obstacle_rows), ""]
-    lines += [f"Wall time: {results.get('wall_s', 0) / 60:.0f} min on {results['machine']['platform']} "
-              f"({results['machine']['note']}).", ""]
+    if args.report_only:
+        lines += ["Assembled by --report-only from the work folder: the runs' compute time is not this command's.",
+                  ""]
+    else:
+        lines += [f"Wall time: {results.get('wall_s', 0) / 60:.0f} min on {results['machine']['platform']} "
+                  f"({results['machine']['note']}).", ""]
     return "\n".join(lines)
 
 

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from lano3dp.evaluate import DEFAULT_LAST_STEPS, DEFAULT_RHO, EvalConfig, write_json
-from lano3dp.pipeline import collect_stage, eval_stage, train_stage
+from lano3dp.pipeline import cached_eval, collect_stage, eval_stage, train_stage
 from lano3dp.report import markdown_table, percent, wilson_interval
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -156,9 +156,12 @@ def run_method(task: str, method: str, seed: int, data: Path, work: Path, args: 
         config = EvalConfig(checkpoint=str(checkpoint), task=task, variation=variation,
                             episodes=episodes or args.episodes, guidance=guidance, rho=args.rho if rho is None else rho,
                             last_steps=args.last_steps, workers=args.workers, out=str(evals / f"{name}.json"))
-        if args.report_only and not is_up_to_date(config):
-            return None
-        summary = eval_stage(config, log=log, command=command)["summary"]
+        if args.report_only:
+            if (results := cached_eval(config)) is None:
+                return None
+            summary = results["summary"]
+        else:
+            summary = eval_stage(config, log=log, command=command)["summary"]
         cells = summary_cells(summary)
         log(f"{key} {name}: success {cells[0]} ({cells[1]}), collisions {percent(summary['collision_rate'])}")
         return _compact(summary)
@@ -188,15 +191,6 @@ def run_method(task: str, method: str, seed: int, data: Path, work: Path, args: 
 
 def _rate(summary: dict | None) -> str:
     return "not run" if summary is None else percent(summary["success_rate"])
-
-
-def is_up_to_date(config: EvalConfig) -> bool:
-    """Whether config.out holds results of exactly this configuration (what eval_stage would skip)."""
-    import json
-    from dataclasses import asdict
-
-    path = Path(config.out)
-    return path.exists() and json.loads(path.read_text()).get("config") == json.loads(json.dumps(asdict(config)))
 
 
 def _floats(text: str) -> list[float]:

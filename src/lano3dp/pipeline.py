@@ -178,13 +178,20 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
 
 
 # ---- evaluate --------------------------------------------------------------------------------------
+def cached_eval(config) -> dict[str, Any] | None:
+    """The results in `config.out` if they were made with this exact EvalConfig, else None."""
+    if config.out and Path(config.out).exists():
+        previous = json.loads(Path(config.out).read_text())
+        if previous.get("config") == json.loads(json.dumps(asdict(config))):
+            return previous
+    return None
+
+
 def eval_stage(config, *, log: Log = _quiet, progress=None, command: str | None = None) -> dict[str, Any]:
     """Evaluate unless `config.out` already holds results made with this exact EvalConfig."""
     from lano3dp.evaluate import evaluate
 
-    if config.out and Path(config.out).exists():
-        previous = json.loads(Path(config.out).read_text())
-        if previous.get("config") == json.loads(json.dumps(asdict(config))):
-            log(f"eval: {config.out} is up to date; skipping")
-            return previous
+    if (previous := cached_eval(config)) is not None:
+        log(f"eval: {config.out} is up to date; skipping")
+        return previous
     return evaluate(config, progress=progress, command=command)

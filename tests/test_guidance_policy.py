@@ -44,7 +44,7 @@ def test_rho_zero_through_the_policy_reproduces_the_unguided_chunk():
 def test_guidance_on_a_0k_moves_the_policys_waypoints_out_of_the_obstacle():
     policy = make_policy()
     obstacle = Cylinder((0.0, 0.0), 0.08, held_radius=0.03)
-    cost = MetricGradient.from_stats(Densified(obstacle, 4), ACTION_MIN, ACTION_MAX)
+    cost = MetricGradient(Densified(obstacle, 4), policy.normalizer.scale("action")[:3])
     unguided = chunk(policy).trajectory[..., :3]
     guided = chunk(policy, GuidanceConfig(GuidanceMode.CLEAN, 0.02, 100), cost).trajectory[..., :3]
     inside = lambda positions: (obstacle.clearance(positions) < 0).float().mean().item()  # noqa: E731

@@ -337,7 +337,8 @@ class MetricGradient:
 
     Args:
         cost: any PositionCost.
-        action_scale: (3,) the normaliser's scale s of the position dims (1/m): 2 / (max - min).
+        action_scale: (3,) the normaliser's scale s of the position dims (1/m), i.e.
+            `policy.normalizer.scale("action")[:3]`, so the guidance sees the same floors as the policy.
     """
 
     def __init__(self, cost: PositionCost, action_scale):
@@ -345,12 +346,6 @@ class MetricGradient:
         self.weight = torch.as_tensor(np.asarray(action_scale, dtype=np.float64)) ** 2
         if self.weight.shape != (3,) or not bool((self.weight > 0).all()):
             raise ValueError(f"action_scale must be 3 positive numbers, got {action_scale!r}")
-
-    @classmethod
-    def from_stats(cls, cost: PositionCost, action_min, action_max) -> MetricGradient:
-        """From the normaliser's action min/max (any length >= 3; the first 3 are the position)."""
-        span = np.asarray(action_max, dtype=np.float64)[:3] - np.asarray(action_min, dtype=np.float64)[:3]
-        return cls(cost, 2.0 / np.maximum(span, 1e-4))
 
     def clearance(self, positions):
         return self.cost.clearance(positions)

@@ -94,3 +94,11 @@ def test_plots_are_written(tmp_path):
                                                        "safe_success_rate": 0.4})])
     for png in (top, rates):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 5000
+
+
+def test_the_carried_object_comes_from_the_skill_registry():
+    from lano3dp.evaluate import carried_slot_word
+
+    assert carried_slot_word("bowl_pour") == "bowl"
+    assert carried_slot_word("close_microwave") is None  # the door is pushed: Q* holds the gripper alone
+    assert carried_slot_word("a_task_no_registry_knows") is None

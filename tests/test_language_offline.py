@@ -140,3 +140,17 @@ def test_scene_given_as_frame_attributes_knows_colours_names_do_not_spell(decomp
         decomposer.decompose("pour the blue bowl into the pan and avoid the white mug", list(scene))  # names only
     described = ["bowl (medium blue bowl)", "pan (medium black pan)", "distractor_mug_2 (medium white mug)"]
     assert describe_scene(scene) == described
+
+
+def test_the_registry_says_what_the_gripper_carries():
+    from lano3dp.language import default_registry
+    from lano3dp.language.registry import SkillSpec, Slot
+
+    registry = default_registry()
+    assert registry.get("bowl_pour").carried_slot == 0
+    assert registry.get("put_item_in_drawer").carried_slot == 0
+    for fixture_skill in ("open_drawer", "close_microwave", "open_wine_bottle"):
+        assert registry.get(fixture_skill).carried_slot is None
+    with pytest.raises(ValueError, match="at most one"):
+        SkillSpec(name="juggle", description="d", verbs=("juggle",),
+                  slots=(Slot(word="ball", carried=True), Slot(word="club", carried=True)))

@@ -191,7 +191,7 @@ def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(obser
     frame, state = observe(env, obs)
     assert scene_obstacles(frame) == ["obstacle_0"]
     runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(margin=0.02)),
-                          obstacle_phrases=["obstacle_0"])
+                          obstacle_phrases=["obstacle_0"], held_object="bowl")
     runner.push(frame, state)
     (cylinder,) = list(runner.obstacles)
     assert isinstance(cylinder, Cylinder) and cylinder.xy_only
@@ -207,6 +207,22 @@ def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(obser
                          obstacle_phrases=["obstacle_0"])
     fixed.push(frame, state)
     assert fixed.held_radius == 0.05
+
+
+def test_a_target_that_is_not_carried_leaves_only_the_gripper_in_q_star(observer):
+    """A door is pushed, not carried: its 40 cm extent in Q* once pushed every path out of the workspace."""
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    obs, _ = env.reset(seed=0)
+    frame, state = observe(env, obs)
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(gripper_radius=0.02)),
+                          obstacle_phrases=["obstacle_0"])
+    runner.push(frame, state)
+    assert runner.held_object is None and runner.held_radius == 0.02
+    runner.set_objects(held_object="bowl")
+    runner.push(frame, state)
+    assert runner.held_radius > 0.09
+    runner.set_objects(obstacle_phrases=["obstacle_0"])  # what is carried stays unless it is named
+    assert runner.held_object == "bowl"
 
 
 def test_a_phrase_naming_several_obstacles_fits_one_cylinder_each(observer):

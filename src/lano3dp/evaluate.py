@@ -193,12 +193,14 @@ class EpisodeRunner:
         config = self.config
         runner = PolicyRunner(self.policy, self.observer, runtime_config(config, seed))
         slots = tuple(self.policy.config.object_names)
+        carried = carried_slot_word(self.task)
 
         def on_reset(runner: PolicyRunner, frame, info) -> None:
             phrases = info.get("target_phrases") or {}
             targets = [phrases.get(slot, slot) for slot in slots] if slots else None
             obstacles = config.obstacles if config.obstacles is not None else scene_obstacles(frame)
-            runner.set_objects(targets if runner.policy_config.obs_type == "objects" else None, obstacles)
+            held = phrases.get(carried, carried) if carried else None
+            runner.set_objects(targets if runner.policy_config.obs_type == "objects" else None, obstacles, held)
 
         frames: list[np.ndarray] = []
         on_frame = (lambda frame, info: frames.append(frame.rgb.copy())) if video_path else None
@@ -212,6 +214,17 @@ class EpisodeRunner:
 
     def close(self) -> None:
         self.env.close()
+
+
+def carried_slot_word(task: str) -> str | None:
+    """The slot word of what the gripper carries in a registered task (its extent enlarges Q*), else None."""
+    from lano3dp.language import default_registry
+
+    registry = default_registry()
+    if task not in registry:
+        return None
+    spec = registry.get(task)
+    return None if spec.carried_slot is None else spec.slot_words[spec.carried_slot]
 
 
 def write_video(path: str | Path, frames: Sequence[np.ndarray], fps: int = 10) -> Path:
@@ -474,6 +487,8 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
     for note in notes:
         log(f"note: {note}")
     targets = plan.target_phrases if policy.config.obs_type == "objects" else None
+    carried = registry.get(plan.skill).carried_slot if plan.skill in registry else None
+    held = plan.target_phrases[carried] if carried is not None else None
     log(f"task {task} / {variation}, seed {config.seed}: targets {targets}, obstacles {obstacles}")
 
     conditions = [("guided" if config.guidance != "none" else "unguided", config.guidance)]
@@ -487,7 +502,7 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
                                  checked=config.checked,
                                  margin=config.margin)
         runner = PolicyRunner(policy, observer, runtime_config(eval_config, config.seed), target_phrases=targets,
-                              obstacle_phrases=obstacles)
+                              obstacle_phrases=obstacles, held_object=held)
         frames: list[np.ndarray] = []
         result = rollout(env, runner, seed=config.seed, max_steps=config.max_steps,
                          on_frame=lambda f, info, frames=frames: frames.append(f.rgb.copy()))

@@ -219,6 +219,9 @@ def resize_rgb(rgb: np.ndarray, size: int) -> np.ndarray:
         (size, size), Image.Resampling.BOX))
 
 
+_UNCHANGED = object()  # set_objects' "leave as is", since None means "nothing held"
+
+
 class PolicyRunner:
     """Receding-horizon controller around a `DiffusionPolicy`.
 
@@ -229,15 +232,15 @@ class PolicyRunner:
         target_phrases: words naming the policy's object slots in this scene, in slot order (default: the
             policy's `object_names`), e.g. ("blue bowl", "pan") among look-alikes.
         obstacle_phrases: objects to avoid; each becomes a cost (needs `observer`).
-        held_object: phrase of the object the gripper carries, whose extent enlarges Q* (default: the first
-            target of an "objects" policy; None or "" for nothing held).
+        held_object: phrase of the object the gripper carries, whose extent enlarges Q* (the skill registry's
+            carried slot, `SkillSpec.carried_slot`); None for a skill that carries nothing (the gripper alone).
         visual_fn: frame -> visual input of one step, overriding the default for the policy's obs_type
             (e.g. the scene-cloud settings the dataset was recorded with).
     """
 
     def __init__(self, policy, observer=None, config: RuntimeConfig | None = None, *,
                  target_phrases: Sequence[str] | None = None, obstacle_phrases: Sequence[str] = (),
-                 held_object: str | None = "__first_target__",
+                 held_object: str | None = None,
                  visual_fn: Callable[[RGBDFrame], np.ndarray] | None = None):
         self.policy = policy
         self.policy_config = policy.config
@@ -259,8 +262,6 @@ class PolicyRunner:
         self.obstacle_phrases = tuple(obstacle_phrases)
         if self.obstacle_phrases and observer is None:
             raise ValueError(f"obstacles {self.obstacle_phrases} need an observer to segment them")
-        if held_object == "__first_target__":
-            held_object = self.target_phrases[0] if (pc.obs_type == "objects" and self.target_phrases) else None
         self.held_object = held_object or None
         self.visual_fn = visual_fn or self._default_visual
         self.history: deque[dict[str, np.ndarray]] = deque(maxlen=self.n_obs_steps)
@@ -292,21 +293,22 @@ class PolicyRunner:
         self.stopped_reason = None
         self.generator = torch.Generator().manual_seed(self.config.seed if seed is None else int(seed))
 
-    def set_objects(self, target_phrases: Sequence[str] | None = None,
-                    obstacle_phrases: Sequence[str] | None = None) -> None:
-        """Change what this episode's scene calls the targets (slot order) and which objects to avoid."""
+    def set_objects(self, target_phrases: Sequence[str] | None = None, obstacle_phrases: Sequence[str] | None = None,
+                    held_object: str | None | object = _UNCHANGED) -> None:
+        """Change what this episode's scene calls the targets (slot order), which objects to avoid, and what
+        the gripper carries (None: nothing)."""
         if target_phrases is not None:
             target_phrases = tuple(target_phrases)
             if self.policy_config.obs_type == "objects" and len(target_phrases) != len(self.policy_config.object_names):
                 raise ValueError(f"the policy has {len(self.policy_config.object_names)} object slots but "
                                  f"{len(target_phrases)} target phrases were given: {target_phrases}")
-            if self.held_object is not None and self.held_object == self.target_phrases[0]:
-                self.held_object = target_phrases[0]
             self.target_phrases = target_phrases
         if obstacle_phrases is not None:
             if obstacle_phrases and self.observer is None:
                 raise ValueError(f"obstacles {tuple(obstacle_phrases)} need an observer to segment them")
             self.obstacle_phrases = tuple(obstacle_phrases)
+        if held_object is not _UNCHANGED:
+            self.held_object = held_object or None
         self.obstacle_cost = None
         self.obstacles = None
 

@@ -12,7 +12,7 @@ import json
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from lano3dp.language.exceptions import SlotMismatchError, UnknownObjectError, UnknownSkillError
 from lano3dp.language.plan import TaskPlan
@@ -31,6 +31,8 @@ class Slot(BaseModel):
         synonyms: other nouns that mean the same object ("skillet" for "pan"); include `word`.
         accepts_any: the slot takes any graspable object (e.g. "put an item in the drawer"); a noun
             that is no registered synonym still fills it and is kept as said.
+        carried: the gripper carries this object through the skill (the bowl that is poured, not the
+            drawer that is pulled), so obstacles must keep clear of its extent too (Q* of the guidance).
     """
 
     model_config = ConfigDict(frozen=True)
@@ -38,6 +40,7 @@ class Slot(BaseModel):
     word: str
     synonyms: tuple[str, ...] = ()
     accepts_any: bool = False
+    carried: bool = False
 
     @field_validator("synonyms", mode="after")
     @classmethod
@@ -72,9 +75,21 @@ class SkillSpec(BaseModel):
     slots: tuple[Slot, ...] = Field(min_length=1)
     checkpoint: Path | None = None
 
+    @model_validator(mode="after")
+    def _one_carried_slot(self):
+        carried = [slot.word for slot in self.slots if slot.carried]
+        if len(carried) > 1:
+            raise ValueError(f"skill {self.name!r}: one gripper carries at most one object, got {carried}")
+        return self
+
     @property
     def slot_words(self) -> tuple[str, ...]:
         return tuple(slot.word for slot in self.slots)
+
+    @property
+    def carried_slot(self) -> int | None:
+        """Index of the slot whose object the gripper carries, or None (a pushed door, a pulled drawer)."""
+        return next((k for k, slot in enumerate(self.slots) if slot.carried), None)
 
 
 class SkillRegistry:
@@ -172,12 +187,12 @@ def describe_scene(scene_objects: SceneObjects) -> list[str]:
     return out
 
 
-def _slot(word: str, *synonyms: str, accepts_any: bool = False) -> Slot:
-    return Slot(word=word, synonyms=synonyms, accepts_any=accepts_any)
+def _slot(word: str, *synonyms: str, accepts_any: bool = False, carried: bool = False) -> Slot:
+    return Slot(word=word, synonyms=synonyms, accepts_any=accepts_any, carried=carried)
 
 
 _DRAWER = _slot("drawer")
-_BOTTLE = _slot("bottle", "flask")
+_CARRIED_BOTTLE = _slot("bottle", "flask", carried=True)
 
 
 def default_registry() -> SkillRegistry:
@@ -188,19 +203,22 @@ def default_registry() -> SkillRegistry:
                 name="bowl_pour",
                 description="grasp the bowl and pour its contents into the pan",
                 verbs=("pour", "empty", "dump", "tip", "decant", "tilt", "fill", "transfer", "spill"),
-                slots=(_slot("bowl", "dish", "basin"), _slot("pan", "frying pan", "skillet", "pot", "saucepan", "wok")),
+                slots=(
+                    _slot("bowl", "dish", "basin", carried=True),
+                    _slot("pan", "frying pan", "skillet", "pot", "saucepan", "wok"),
+                ),
             ),
             SkillSpec(
                 name="bottle_upright",
                 description="stand a bottle that lies on its side upright",
                 verbs=("stand", "upright", "right", "erect", "raise"),
-                slots=(_BOTTLE,),
+                slots=(_CARRIED_BOTTLE,),
             ),
             SkillSpec(
                 name="bottle_in_drawer",
                 description="put the bottle into the open drawer",
                 verbs=("put", "place", "store", "stow", "insert", "drop", "move", "tuck", "set"),
-                slots=(_BOTTLE, _DRAWER),
+                slots=(_CARRIED_BOTTLE, _DRAWER),
             ),
             SkillSpec(
                 name="open_drawer",
@@ -228,6 +246,7 @@ def default_registry() -> SkillRegistry:
                         "mobile phone",
                         "handset",
                         "telephone",
+                        carried=True,
                     ),
                     _slot("base", "dock", "cradle", "charger", "charging base", "charging dock", "station"),
                 ),  # fmt: skip
@@ -236,19 +255,22 @@ def default_registry() -> SkillRegistry:
                 name="put_item_in_drawer",
                 description="put a small item (a block by default) into the open drawer",
                 verbs=("put", "place", "store", "stow", "insert", "drop", "move", "tuck", "set"),
-                slots=(_slot("block", "item", "object", "toy", accepts_any=True), _DRAWER),
+                slots=(_slot("block", "item", "object", "toy", accepts_any=True, carried=True), _DRAWER),
             ),
             SkillSpec(
                 name="sweep_to_dustpan",
                 description="sweep the dirt into the dustpan with the broom",
                 verbs=("sweep", "brush"),
-                slots=(_slot("broom", "brush"), _slot("dustpan", "dust pan")),
+                slots=(_slot("broom", "brush", carried=True), _slot("dustpan", "dust pan")),
             ),
             SkillSpec(
                 name="water_plants",
                 description="pour water on the plant with the watering can",
                 verbs=("water", "irrigate", "sprinkle"),
-                slots=(_slot("watering can", "sprinkler", "watering jug"), _slot("plant", "flower", "houseplant")),
+                slots=(
+                    _slot("watering can", "sprinkler", "watering jug", carried=True),
+                    _slot("plant", "flower", "houseplant"),
+                ),
             ),
             SkillSpec(
                 name="open_wine_bottle",

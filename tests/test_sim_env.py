@@ -100,11 +100,12 @@ def test_frame_carries_ground_truth_instances(env):
 
 
 def test_extreme_random_actions_among_obstacles_never_crash():
-    environment = TabletopEnv("bottle_upright", variation="obstacle+clutter", image_size=32, render_rgb=False)
+    environment = TabletopEnv("bowl_pour", variation="obstacle+clutter", image_size=32, render_rgb=False)
     rng = np.random.default_rng(1)
     environment.action_space.seed(8)
     try:
         environment.reset(seed=0)
+        assert any(o.role == "obstacle" for o in environment.episode.extras.objects)
         for t in range(60):
             action = environment.action_space.sample() if t % 2 else rng.uniform(-3, 3, size=10)
             obs, _, _, _, info = environment.step(action)

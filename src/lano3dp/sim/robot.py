@@ -31,6 +31,7 @@ if TYPE_CHECKING:
 
 TOP_DOWN = np.diag([1.0, -1.0, -1.0])
 HOME_POSITION = np.array([0.30, 0.0, 0.30])
+GRIPPER_FOOTPRINT_RADIUS = 0.07  # covers the open palm's 6.5 cm half-width about the EE axis
 GRIPPER_BODIES = ("gripper", "gripper/left_finger", "gripper/right_finger")
 
 
@@ -126,7 +127,7 @@ def add_gripper(builder: SceneBuilder, gripper: GripperSpec) -> ObjectInfo:
     actuator.forcerange = [-gripper.max_force, gripper.max_force]
     actuator.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
     info = ObjectInfo(name="gripper", kind="gripper", color="grey", body_names=GRIPPER_BODIES,
-                      footprint_radius=0.07, position=np.asarray(gripper.home), role="robot",
+                      footprint_radius=GRIPPER_FOOTPRINT_RADIUS, position=np.asarray(gripper.home), role="robot",
                       extents=np.array([0.02, gripper.half_gap + 0.02, 0.12]))
     return builder.register(info)
 

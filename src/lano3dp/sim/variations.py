@@ -26,6 +26,7 @@ import numpy as np
 from lano3dp.errors import Lano3dpError
 from lano3dp.sim.objects import PALETTE
 from lano3dp.sim.objects.primitives import FOOTPRINTS
+from lano3dp.sim.robot import GRIPPER_FOOTPRINT_RADIUS, HOME_POSITION
 from lano3dp.sim.scene import FRONT_CAMERA, SHIFTED_CAMERA, CameraPose, SceneStyle
 
 VARIATION_AXES = ("clutter", "similar", "instance", "camera", "background", "obstacle")
@@ -33,6 +34,8 @@ DISTRACTOR_KINDS = ("mug", "cube", "plate", "can", "ball", "bowl", "bottle")
 # Where loose objects may be placed (x, y), metres, world frame; all of it is in the front camera's view.
 PLACEMENT_LOW = np.array([0.22, -0.36])
 PLACEMENT_HIGH = np.array([0.64, 0.36])
+# Free xy distance (m) between an obstacle and the gripper's footprint at its start pose: room to steer round.
+START_CLEARANCE = 0.01
 
 
 class VariationError(Lano3dpError, ValueError):
@@ -208,8 +211,11 @@ def sample_obstacles(task, layout, rng: np.random.Generator, count: int,
     First within 2 cm of the task's `obstacle_region` (its transport segment); where that has no
     free spot (e.g. a task whose path only rises and falls over its objects), within 5 cm of any
     segment of the nominal path. Fewer than `count` obstacles are returned when neither has room.
+    No obstacle comes within START_CLEARANCE of the gripper at its start pose: one standing there
+    touched the gripper before the policy acted (70% of close_microwave episodes), whatever it did.
     """
     attempts = [(task.obstacle_region(layout), 0.02, 200), (task.nominal_path(layout), 0.05, 300)]
+    start = (HOME_POSITION[:2], GRIPPER_FOOTPRINT_RADIUS + START_CLEARANCE - 0.015)  # 1.5 cm added below
     obstacles = []
     for i in range(count):
         placed = False
@@ -225,7 +231,7 @@ def sample_obstacles(task, layout, rng: np.random.Generator, count: int,
                 xy = a + rng.uniform(0.1, 0.9) * direction + normal * rng.uniform(-offset, offset)
                 if np.any(xy < PLACEMENT_LOW) or np.any(xy > PLACEMENT_HIGH):
                     continue
-                if any(np.linalg.norm(xy - c) < r + radius + 0.015 for c, r in footprints):
+                if any(np.linalg.norm(xy - c) < r + radius + 0.015 for c, r in [*footprints, start]):
                     continue
                 footprints.append((xy, radius))
                 obstacles.append(ExtraObject(f"obstacle_{i}", "cylinder", xy, 0.0, "grey", 1.0, "obstacle",

@@ -7,8 +7,11 @@ Per task:
      best `--best-k` evaluations along training) and the honest one (the final checkpoint);
   4. evaluate the final checkpoint on each variation axis (`--variations`: clutter, camera, background,
      similar, ...), the generalisation table of the paper;
-  5. obstacle test on the final Lan-o3dp checkpoint (`--obstacle-methods` for the others): a novel obstacle
-     on the expert's path, without and with cost guidance (A_0|k): success and collision rates.
+  5. obstacle test on the final Lan-o3dp checkpoint (`--obstacle-methods` for the others) of the
+     `--obstacle-tasks`: a novel obstacle on the expert's path, without and with cost guidance (A_0|k):
+     success and collision rates. Those tasks carry an object along a transport segment with room for
+     an obstacle (door and drawer handles are within reach of the gripper's start: no obstacle fits
+     there); one not in `--tasks` gets the obstacle methods trained on clean scenes, steps 1-3 only.
 
 Methods share everything but the observation: "objects" (Lan-o3dp: clouds of the task's objects chosen by
 name), "scene" (DP3: the cropped scene cloud), "image" (Diffusion Policy: a 96x96 RGB image). Evaluation
@@ -48,6 +51,8 @@ ROOT = Path(__file__).resolve().parent.parent
 METHODS = {"objects": "Lan-o3dp (object clouds)", "scene": "DP3 (scene cloud)", "image": "Diffusion Policy (RGB)"}
 # The three shortest-horizon tasks: the ones a CPU can train in minutes (bowl_pour needs far longer).
 DEFAULT_TASKS = "open_drawer,close_microwave,open_wine_bottle"
+# A pick-and-place whose transport segment has room for an obstacle in most layouts (tests/test_tasks_common.py).
+DEFAULT_OBSTACLE_TASKS = "put_item_in_drawer"
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -64,6 +69,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--best-k", type=int, default=5, help="the paper's number: mean of the k best evaluations")
     parser.add_argument("--variations", default="clutter,camera,background,similar",
                         help="variation axes evaluated on the final checkpoint ('' for none)")
+    parser.add_argument("--obstacle-tasks", default=DEFAULT_OBSTACLE_TASKS,
+                        help="tasks given the obstacle test ('' none); trained just for it if not in --tasks")
     parser.add_argument("--obstacle-methods", default="objects", help="methods given the obstacle test ('' none)")
     parser.add_argument("--obstacle-episodes", type=int, default=None, help="episodes of the obstacle test "
                                                                             "(default: --episodes)")
@@ -99,6 +106,7 @@ def main(argv=None) -> int:
         raise SystemExit(f"unknown methods {unknown}; choose from {sorted(METHODS)}")
     variations = [v for v in args.variations.split(",") if v]
     obstacle_methods = [m for m in args.obstacle_methods.split(",") if m]
+    obstacle_tasks = [t for t in args.obstacle_tasks.split(",") if t]
     seeds = [int(s) for s in args.seeds.split(",") if s]
     work = Path(args.work)
     command = shlex.join(["python", "bench/bench_protocol.py", *(argv if argv is not None else sys.argv[1:])])
@@ -113,16 +121,20 @@ def main(argv=None) -> int:
     out_json = ROOT / "results" / f"protocol{args.tag}.json"
     out_md = ROOT / "results" / f"protocol{args.tag}.md"
 
-    for task in tasks:
+    for task in [*tasks, *(t for t in obstacle_tasks if t not in tasks)]:
+        obstacle_only = task not in tasks
         data = work / "data" / f"{task}_n{args.points}.zarr"
         if not args.report_only:
             collect_stage(task, args.demos, data, log=log, progress=False, n_points=args.points)
         task_result = results["tasks"].setdefault(task, {})
         for method in methods:
+            if obstacle_only and method not in obstacle_methods:
+                continue
             for seed in seeds:
-                task_result[f"{method}/seed{seed}"] = run_method(task, method, seed, data, work, args, log, command,
-                                                                 obstacle=method in obstacle_methods,
-                                                                 variations=variations)
+                entry = run_method(task, method, seed, data, work, args, log, command,
+                                   obstacle=method in obstacle_methods and task in obstacle_tasks,
+                                   variations=[] if obstacle_only else variations)
+                task_result[f"{method}/seed{seed}"] = {**entry, "obstacle_only": obstacle_only}
                 results["wall_s"] = round(time.perf_counter() - started, 1)
                 write_json(out_json, results)
                 out_md.write_text(markdown_report(results, args))
@@ -189,7 +201,9 @@ def run_method(task: str, method: str, seed: int, data: Path, work: Path, args: 
     return entry
 
 
-def _rate(summary: dict | None) -> str:
+def _rate(summary: dict | None, evaluated: bool = True) -> str:
+    if not evaluated:
+        return "–"
     return "not run" if summary is None else percent(summary["success_rate"])
 
 
@@ -226,16 +240,17 @@ def markdown_report(results: dict, args: argparse.Namespace) -> str:
         rows = []
         variation_names = args.variations.split(",") if args.variations else []
         for entry in entries.values():
+            evaluated = not entry.get("obstacle_only")  # a task run for the obstacle test has no variation axes
             if entry.get("not_run"):
                 rows.append([entry["method"], entry["seed"], "–", "–", "not run", "not run",
-                             *("not run" for _ in variation_names)])
+                             *(_rate(None, evaluated) for _ in variation_names)])
                 continue
             final = entry["final"]
             low, high = wilson_interval(final["successes"], final["episodes"])
             rows.append([entry["method"], entry["seed"], f"{entry['parameters'] / 1e6:.2f} M", entry["steps"],
                          f"{percent(entry['paper_best_k'])} (best {entry['best_k_used']})",
                          f"{percent(final['success_rate'])} ({percent(low)}–{percent(high)})",
-                         *(_rate(entry["variations"].get(v)) for v in variation_names)])
+                         *(_rate(entry["variations"].get(v), evaluated) for v in variation_names)])
         lines += [markdown_table(["method", "seed", "params", "steps", "paper: best-k clean", "final clean",
                                   *variation_names], rows), ""]
         curve_rows = [[entry["method"], entry["seed"],

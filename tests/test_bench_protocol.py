@@ -40,3 +40,14 @@ def test_report_marks_missing_runs_and_evaluations_as_not_run():
     assert "| guidance A_0\\|k, rho 0.01 | not run |" in text
     assert "| no guidance | 20 | 18 | 65% | 90% | 19.8 | 65% | -3.1 cm |" in text
     assert "Assembled by --report-only" in text
+
+
+def test_a_task_run_only_for_the_obstacle_test_has_no_variation_cells():
+    bench = load_bench()
+    args = bench.parse_args(["--tasks", "open_drawer", "--obstacle-tasks", "put_item_in_drawer",
+                             "--variations", "clutter", "--report-only"])
+    assert args.obstacle_tasks == "put_item_in_drawer"
+    obstacle_only = {"method": bench.METHODS["objects"], "seed": 0, "not_run": True, "obstacle_only": True}
+    results = {"command": "c", "machine": {"platform": "x", "note": "y"},
+               "tasks": {"put_item_in_drawer": {"objects/seed0": obstacle_only}}}
+    assert "| Lan-o3dp (object clouds) | 0 | – | – | not run | not run | – |" in bench.markdown_report(results, args)

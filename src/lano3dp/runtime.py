@@ -59,7 +59,8 @@ class ObstacleModel:
             it from the held object's cloud (`held_object` of the runner) as `held_extent` x its fitted radius.
         held_extent: multiple of the held object's fitted radius; 2.0 = its diameter (the paper's choice, as a
             rim grasp puts the object's far side a diameter away from the EE).
-        gripper_radius: lower bound of the held radius (m): the fingers themselves.
+        gripper_radius: lower bound of the held radius (m): the open hand's half-span about the EE axis (the
+            simulator's palm is 13 cm wide; with 2 cm, the fingers alone, the palm hit obstacles the EE cleared).
         xy_only: measure distances in the horizontal plane only (the paper's setting).
         refit_every_chunk: re-segment and re-fit obstacles before every chunk (moving obstacles); by default
             they are fitted once, on the first frame of the episode, before the arm can occlude them.
@@ -69,7 +70,7 @@ class ObstacleModel:
     margin: float = 0.02
     held_radius: float | None = None
     held_extent: float = 2.0
-    gripper_radius: float = 0.02
+    gripper_radius: float = 0.07
     xy_only: bool = True
     refit_every_chunk: bool = False
 

@@ -194,7 +194,7 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         "scenes: clean ones, and ones with a **novel obstacle** on the expert's path (never seen in training), "
         f"without and with the paper's cost guidance on A_0|k (rho = {rho:g} m per guided step with the isotropic "
         f"metric push on the densified path, S = {last_steps}; the obstacle is segmented, fitted with a vertical "
-        "cylinder, and Q* = its radius + the held object's extent + 2 cm).",
+        "cylinder, and Q* = its radius + 2 cm + the carried object's extent, at least the open hand's 7 cm).",
         "",
         f"Policy: {parameters / 1e6:.2f} M parameters, UNet {tuple(policy_config.down_dims)}, "
         f"{policy_config.n_points} points per object, obs {policy_config.n_obs_steps} steps, horizon "

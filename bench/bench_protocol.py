@@ -23,10 +23,10 @@ evaluation whose JSON exists with the same configuration is skipped. Outputs:
     results/protocol<tag>.json                 every number, the configuration, the command, the seeds
     results/protocol<tag>.md                   the tables, headed by the command that made them
 
-The default protocol (3 tasks x 3 methods x 2000 steps, 20 episodes per evaluation, and Lan-o3dp on the obstacle
-task) takes about 6-7 CPU-hours here, most of it training the two baselines (a step of the scene-cloud encoder costs ~4x, of the image
-encoder ~5x, a Lan-o3dp step). One process per task over one --work folder uses both cores; then
---report-only tabulates the folder. A reduced run, e.g. for a smoke check:
+The default protocol (3 tasks x 3 methods x 2000 steps, 20 episodes per evaluation, and Lan-o3dp on the
+obstacle task) takes about 6-7 CPU-hours here, most of it training the two baselines (a step of the
+scene-cloud encoder costs ~4x, of the image encoder ~5x, a Lan-o3dp step). One process per task over
+one --work folder uses both cores; then --report-only tabulates the folder. A reduced run, e.g. for a smoke check:
 
     OMP_NUM_THREADS=1 python bench/bench_protocol.py --tasks bowl_pour --demos 20 --steps 400 --eval-every 200 \
         --episodes 5 --variations camera,clutter --tag _reduced

@@ -75,6 +75,8 @@ def test_eval_stage_reuses_results_made_with_the_same_config(tmp_path):
     config = EvalConfig(checkpoint=str(tmp_path / "no_such_checkpoint"), episodes=3, out=str(out))
     write_json(out, {"config": asdict(config), "summary": {"success_rate": 0.5}})
     assert eval_stage(config)["summary"]["success_rate"] == 0.5  # not re-run (the checkpoint does not exist)
+    more_workers = EvalConfig(checkpoint=config.checkpoint, episodes=3, workers=2, out=str(out))
+    assert eval_stage(more_workers)["summary"]["success_rate"] == 0.5  # seeded episodes: same results
     changed = EvalConfig(checkpoint=config.checkpoint, episodes=4, out=str(out))
     with pytest.raises(FileNotFoundError, match="no policy checkpoint"):
         eval_stage(changed)  # a different config is evaluated anew

@@ -178,11 +178,20 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
 
 
 # ---- evaluate --------------------------------------------------------------------------------------
+# Fields that change how an evaluation runs, not what it measures: every episode is seeded by itself.
+_EVAL_FIELDS_NOT_MEASURED = ("workers",)
+
+
 def cached_eval(config) -> dict[str, Any] | None:
-    """The results in `config.out` if they were made with this exact EvalConfig, else None."""
+    """The results in `config.out` if they were made with this EvalConfig (up to the worker count), else None."""
     if config.out and Path(config.out).exists():
         previous = json.loads(Path(config.out).read_text())
-        if previous.get("config") == json.loads(json.dumps(asdict(config))):
+        wanted = json.loads(json.dumps(asdict(config)))
+        made = dict(previous.get("config") or {})
+        for name in _EVAL_FIELDS_NOT_MEASURED:
+            wanted.pop(name, None)
+            made.pop(name, None)
+        if made == wanted:
             return previous
     return None
 

@@ -197,7 +197,7 @@ def cached_eval(config) -> dict[str, Any] | None:
 
 
 def eval_stage(config, *, log: Log = _quiet, progress=None, command: str | None = None) -> dict[str, Any]:
-    """Evaluate unless `config.out` already holds results made with this exact EvalConfig."""
+    """Evaluate unless `config.out` already holds results made with this EvalConfig (see `cached_eval`)."""
     from lano3dp.evaluate import evaluate
 
     if (previous := cached_eval(config)) is not None:

@@ -2,8 +2,11 @@
 
 Action (10,) float: absolute EE target = position (3, metres, world frame) + rotation 6D
 (6: first two columns of the EE rotation matrix) + gripper command (1: 0 open .. 1 closed).
-Each `step` moves the mocap target from the previous target to this one over the control
-period (1 / control_hz s = 25 physics steps of 4 ms at 10 Hz), so large jumps are spread out.
+Each `step` moves the mocap target from the previous target towards this one over the control
+period (1 / control_hz s = 25 physics steps of 4 ms at 10 Hz), by at most what a real arm moves in
+that time (`MotionLimits`: 0.5 m/s, 2.5 rad/s by default). A target farther away is reached over
+several steps, so no policy succeeds by teleporting the hand; `info["motion_limited"]` says when
+a step was cut short.
 
 Bad actions:
   * NaN / inf anywhere, wrong shape, or a degenerate rotation 6D (zero or parallel columns)
@@ -17,7 +20,7 @@ Observation (dict): "rgb" (H, W, 3) uint8 (if render_rgb), "depth" (H, W) float3
 "cam_to_world" (4, 4) float32 (OpenCV convention). `env.frame()` returns the same images as
 an `RGBDFrame` with `instance_names` and `instance_attributes` for the ground-truth segmenter.
 
-Info: "success", "is_success", "action_clipped", "obstacle_contacts" (contact events of the
+Info: "success", "is_success", "action_clipped", "motion_limited", "obstacle_contacts" (contact events of the
 gripper or held object with obstacles during this step: dicts with obstacle, body, depth),
 "n_obstacle_contacts" (episode total), "min_obstacle_clearance" (metres at the end of the step;
 inf without obstacles; negative = penetration: the hand follows its target through a stiff
@@ -37,7 +40,7 @@ from gymnasium import spaces
 
 from lano3dp.errors import Lano3dpError
 from lano3dp.geometry import RGBDFrame
-from lano3dp.sim.experts import CONTROL_HZ, MotionPlan
+from lano3dp.sim.experts import CONTROL_HZ, MotionPlan, slerp
 from lano3dp.sim.objects import ObjectInfo, primitives
 from lano3dp.sim.render import FusedRenderer
 from lano3dp.sim.robot import GripperHandle, GripperSpec, rot6d
@@ -52,6 +55,21 @@ CAMERAS = {"front": FRONT_CAMERA, "shifted": SHIFTED_CAMERA}
 # Physics substeps between obstacle checks / mocap updates within one control step.
 _CHUNK = 5
 _SETTLE_STEPS = 75  # 0.3 s for objects to come to rest after building
+
+
+@dataclass(frozen=True)
+class MotionLimits:
+    """Largest end-effector speeds the simulated arm follows (m/s, rad/s).
+
+    The angular limit is the Franka Panda's Cartesian rotation limit (2.5 rad/s, Franka's interface
+    specification); the linear one is well inside the Panda's 1.7 m/s and a UR5e's 1 m/s TCP limits and
+    twice the scripted experts' fastest segment (0.25 m/s peak), so demonstrations never meet it. Before
+    the limit, one 10 Hz step could move the hand 25 cm, and an untrained policy "closed" the microwave
+    by jumping through it.
+    """
+
+    linear: float = 0.5
+    angular: float = 2.5
 
 
 class InvalidActionError(Lano3dpError, ValueError):
@@ -81,13 +99,15 @@ class TabletopEnv(gym.Env):
         render_rgb: also render the colour image (depth + segmentation are always rendered).
         control_hz: control rate (physics runs at 250 Hz, 4 ms steps; 1 / control_hz must be a multiple of 20 ms).
         max_steps: episode limit (default: the task's).
+        motion_limits: the EE speed limits each step's target motion is bounded by.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": int(CONTROL_HZ)}
 
     def __init__(self, task: str | Task = "bowl_pour", variation=None, camera: str | CameraPose = "front",
                  image_size: int | tuple[int, int] = 128, render_rgb: bool = True, control_hz: float = CONTROL_HZ,
-                 max_steps: int | None = None, render_mode: str | None = "rgb_array"):
+                 max_steps: int | None = None, render_mode: str | None = "rgb_array",
+                 motion_limits: MotionLimits = MotionLimits()):
         self.task = make_task(task) if isinstance(task, str) else task
         self.variation = Variation.parse(variation)
         if isinstance(camera, str):
@@ -104,6 +124,7 @@ class TabletopEnv(gym.Env):
         if self.substeps % _CHUNK:
             raise ValueError(f"control_hz must give a multiple of {_CHUNK} physics steps, got {self.substeps}")
         self.max_steps = int(max_steps or self.task.max_steps)
+        self.motion_limits = motion_limits
         self.gripper_spec = GripperSpec()
         self.workspace_low, self.workspace_high = WORKSPACE_LOW.copy(), WORKSPACE_HIGH.copy()
 
@@ -219,6 +240,7 @@ class TabletopEnv(gym.Env):
         start_pos, start_quat = self._target_pos, self._target_quat
         if np.dot(start_quat, quat) < 0:
             quat = -quat
+        position, quat, limited = self._bounded_target(start_pos, start_quat, position, quat)
         chunks = self.substeps // _CHUNK
         contacts, clearance = [], np.inf
         for k in range(1, chunks + 1):
@@ -240,7 +262,26 @@ class TabletopEnv(gym.Env):
         self._frame = None
         obs = self._observe()
         truncated = self._steps >= self.max_steps and not self._success
-        return obs, float(self._success), self._success, truncated, self._info(clipped, contacts, clearance)
+        return obs, float(self._success), self._success, truncated, self._info(clipped, contacts, clearance,
+                                                                               limited)
+
+    def _bounded_target(self, start_pos: np.ndarray, start_quat: np.ndarray, position: np.ndarray,
+                        quat: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """The target this step reaches: `position` / `quat` (wxyz, same hemisphere as `start_quat`),
+        moved back towards the start so that neither speed limit is exceeded. Returns (position, quat, limited)."""
+        max_distance = self.motion_limits.linear / self.control_hz
+        max_angle = self.motion_limits.angular / self.control_hz
+        offset = position - start_pos
+        distance = float(np.linalg.norm(offset))
+        angle = 2.0 * float(np.arccos(np.clip(abs(np.dot(start_quat, quat)), 0.0, 1.0)))
+        limited = False
+        if distance > max_distance:
+            position = start_pos + offset * (max_distance / distance)
+            limited = True
+        if angle > max_angle:
+            quat = slerp(start_quat, quat, max_angle / angle)
+            limited = True
+        return position, quat, limited
 
     def _obstacle_contacts(self) -> list[dict]:
         data, model = self.data, self.model
@@ -314,12 +355,13 @@ class TabletopEnv(gym.Env):
         """The observation camera (PinholeCamera) of the current episode."""
         return self._images.camera
 
-    def _info(self, clipped: bool, contacts: list, clearance: float) -> dict:
+    def _info(self, clipped: bool, contacts: list, clearance: float, limited: bool = False) -> dict:
         layout = self.episode.layout
         return {
             "success": self._success,
             "is_success": self._success,
             "action_clipped": clipped,
+            "motion_limited": limited,
             "obstacle_contacts": contacts,
             "n_obstacle_contacts": self._n_contacts,
             "min_obstacle_clearance": clearance,

@@ -105,12 +105,37 @@ def test_a_training_budget_stops_the_run_checkpointed_and_a_rerun_skips_it(train
     policy = policy_config_for_dataset(data, down_dims=(32, 64), point_hidden_dims=(32,), encoder_out=16,
                                        state_feature_dim=16, diffusion_step_embed_dim=16)
     run = root / "budget_run"
-    # a budget of ~0 s: the planned steps (at least 50) are cut after the first one, which is checkpointed
+    # a CPU budget of ~0 s: the planned steps (at least 50) are cut after the first one, which is checkpointed
     final = train_stage(data, run, policy_config=policy, minutes=1e-6, batch_size=8, progress=False, val_ratio=0.0)
     assert final.name == "step_0000001"
     assert DiffusionPolicy.from_pretrained(run).config.down_dims == (32, 64)
     saved = json.loads((run / "train_config.json").read_text())
-    assert saved["steps"] == 1 and saved["extra"]["planned_steps"] >= 50
+    assert saved["steps"] >= 50 and saved["extra"]["stopped_by_budget_at"] == 1 and saved["cpu_minutes"] == 1e-6
     messages = []
     assert train_stage(data, run, policy_config=policy, minutes=1e-6, batch_size=8, log=messages.append) == final
     assert messages == [f"train: {run} is complete (1 steps); skipping"]
+
+
+def test_the_training_budget_counts_cpu_time_so_a_sleeping_machine_does_not_shorten_it(trained, monkeypatch):
+    """Wall time spent off the CPU (another job holding the core, here a sleep) does not count."""
+    import time as time_module
+
+    from lano3dp.train import TrainConfig, Trainer, policy_config_for_dataset
+
+    root, _ = trained
+    data = root / "bowl_pour.zarr"
+    policy = policy_config_for_dataset(data, down_dims=(32, 64), point_hidden_dims=(32,), encoder_out=16,
+                                       state_feature_dim=16, diffusion_step_embed_dim=16)
+    config = TrainConfig(data=str(data), out=str(root / "cpu_budget_run"), policy=policy, steps=6, batch_size=8,
+                         val_ratio=0.0, progress=False, cpu_minutes=1.5 / 60, warmup_steps=1)
+    trainer = Trainer(config)
+    subsample = trainer._subsample
+
+    def slow_batch(*args, **kwargs):
+        time_module.sleep(0.5)  # 3 s of wall time in all, twice the budget, but no CPU
+        return subsample(*args, **kwargs)
+
+    monkeypatch.setattr(trainer, "_subsample", slow_batch)
+    trainer.run()
+    assert trainer.step == 6 and not trainer.stopped_by_budget
+    assert trainer.cpu_seconds < 1.5

@@ -13,7 +13,7 @@ from lano3dp.policy.encoders import ObjectCloudsEncoder, PointMLPEncoder, Residu
 from lano3dp.policy.unet import ConditionalUnet1D
 
 TINY = dict(down_dims=(16, 32), diffusion_step_embed_dim=16, n_groups=4, point_hidden_dims=(16, 32),
-            encoder_out=16, state_feature_dim=16, n_points=32)
+            encoder_out=16, state_feature_dim=16, n_points=32, n_obs_steps=2)  # two steps: the windowing paths
 
 
 def tiny_config(**changes) -> PolicyConfig:
@@ -57,13 +57,20 @@ def test_config_round_trips_through_json_and_keeps_tuples():
     assert json.loads(config.to_json())["down_dims"] == [16, 32]
 
 
-def test_config_defaults_follow_the_paper_and_cpu_notes():
+def test_config_defaults_follow_the_paper_and_the_cpu_budget():
     config = PolicyConfig(object_names=("bowl",))
-    assert (config.n_obs_steps, config.horizon, config.n_action_steps) == (2, 16, 8)
-    assert config.down_dims == (64, 128, 256) and config.kernel_size == 5 and config.n_groups == 8
-    assert config.point_encoder == "residual" and config.encoder_out == 64 and config.n_points == 256
+    assert (config.n_obs_steps, config.horizon, config.n_action_steps) == (1, 16, 8)
+    assert config.down_dims == (48, 96, 192) and config.kernel_size == 5 and config.n_groups == 8
+    assert config.point_encoder == "residual" and config.encoder_out == 64 and config.n_points == 64
     assert (config.num_train_timesteps, config.beta_schedule, config.prediction_type) == (
         100, "squaredcos_cap_v2", "epsilon")
+
+
+@pytest.mark.parametrize("obs_type, slots", [("objects", ("bowl", "pan", "mug")), ("scene", ()), ("image", ())])
+def test_a_default_policy_fits_a_packaged_checkpoint_in_fp16(obs_type, slots):
+    """Packaged checkpoints hold fp16 weights of at most 6 MB each."""
+    policy = DiffusionPolicy(PolicyConfig(obs_type=obs_type, object_names=slots))
+    assert 2 * sum(p.numel() for p in policy.parameters()) <= 6 * 2**20
 
 
 @pytest.mark.parametrize("changes, message", [
@@ -72,7 +79,7 @@ def test_config_defaults_follow_the_paper_and_cpu_notes():
     (dict(object_names=("bowl", "bowl")), "distinct"),
     (dict(point_encoder="pointnet"), "point_encoder"),
     (dict(horizon=10, down_dims=(16, 32, 64)), "divisible by 2"),
-    (dict(n_action_steps=16), "n_action_steps"),
+    (dict(n_obs_steps=2, n_action_steps=16), "n_action_steps"),
     (dict(prediction_type="sample"), "epsilon"),
     (dict(down_dims=(10, 20)), "n_groups"),
 ])

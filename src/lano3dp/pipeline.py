@@ -5,7 +5,7 @@ benchmark with the same output folder continues where it stopped:
 
     collect_stage    a zarr dataset with at least N episodes (collection appends to an existing store)
     train_stage      a training run up to its step count (the trainer resumes from its last checkpoint);
-                     with a wall-clock budget the step count is chosen once, from a short timing probe,
+                     with a CPU-time budget the step count is chosen once, from a short timing probe,
                      and saved in the run's train_config.json, so a resumed run keeps it
     eval_stage       a results JSON, reused when it was made with the same EvalConfig
 """
@@ -57,12 +57,13 @@ def collect_stage(task: str, episodes: int, out: str | Path, *, log: Log = _quie
 
 
 # ---- train -----------------------------------------------------------------------------------------
-def time_training_step(data: str | Path, policy_config, batch_size: int, *, warmup: int = 2, steps: int = 4,
+def time_training_step(data: str | Path, policy_config, batch_size: int, *, warmup: int = 3, steps: int = 8,
                        seed: int = 0) -> float:
-    """Seconds per optimisation step of `policy_config` on `data` at this batch size, measured here and now.
+    """CPU seconds per optimisation step of `policy_config` on `data` at this batch size, measured here and now.
 
-    A throwaway model does `warmup` + `steps` real steps (data windows, forward, backward, fused AdamW), so the
-    number includes this machine's current load. Used only to turn a time budget into a step count.
+    A throwaway model does `warmup` + `steps` real steps (batch assembly, forward, backward, fused AdamW) and
+    the median of the process CPU time per step is returned: what a CPU-time budget buys, nearly
+    independent of other jobs on the machine. Used only to turn a budget into a step count.
     """
     import numpy as np
     import torch
@@ -81,65 +82,35 @@ def time_training_step(data: str | Path, policy_config, batch_size: int, *, warm
     generator = torch.Generator().manual_seed(seed)
     times = []
     for index in range(warmup + steps):
+        started = time.process_time()
         batch = default_collate([dataset[int(i)] for i in rng.integers(0, len(dataset), batch_size)])
-        started = time.perf_counter()
         loss = policy.compute_loss(batch, generator=generator)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
         optimizer.step()
         if index >= warmup:
-            times.append(time.perf_counter() - started)
+            times.append(time.process_time() - started)
     return float(np.median(times))
 
 
-def train_with_deadline(config, seconds: float | None) -> tuple[Path, bool]:
-    """Run a `Trainer` that stops, checkpointed, at the first step after `seconds` of wall time.
-
-    Returns (final checkpoint, whether the deadline cut the run short). The trainer has no time limit
-    of its own, so this wraps its progress bar, which the loop updates after every step and before its
-    checkpoint test: lowering `config.steps` to the current step there makes the loop save this step and
-    end, exactly as at a planned last step. The LR schedule keeps the planned length.
-    """
-    from lano3dp.train import Trainer
-
-    trainer = Trainer(config)
-    stopped = False
-    if seconds is not None:
-        end = time.monotonic() + seconds
-        make_progress = trainer._progress
-
-        def progress():
-            bar = make_progress()
-            update = bar.update
-
-            def update_and_check(n=1):
-                nonlocal stopped
-                result = update(n)
-                if time.monotonic() > end and trainer.step < trainer.config.steps:
-                    trainer.config.steps = trainer.step
-                    stopped = True
-                return result
-
-            bar.update = update_and_check
-            return bar
-
-        trainer._progress = progress
-    return Path(trainer.run()), stopped
+# Validation losses, EMA updates and checkpoints on top of the probed steps (measured: 3-6%).
+_TRAINING_OVERHEAD = 1.06
 
 
 def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps: int | None = None,
-                minutes: float | None = None, min_steps: int = 50, max_steps: int = 20_000, batch_size: int = 64,
-                lr: float = 1e-3, warmup_steps: int | None = None, ckpt_every: int | None = None, seed: int = 0,
-                log: Log = _quiet, **train_options) -> Path:
+                minutes: float | None = None, min_steps: int = 50, max_steps: int = 50_000, batch_size: int = 64,
+                lr: float = 1e-3, warmup_steps: int | None = None, ckpt_every: int | None = None,
+                n_checkpoints: int = 1, seed: int = 0, log: Log = _quiet, **train_options) -> Path:
     """Train (or resume, or skip) a policy run; returns its final checkpoint folder.
 
-    Give `steps`, or `minutes`: a wall-clock budget for the optimisation. The planned step count (and so the
-    LR schedule) comes from a short timing probe (`time_training_step`), and the run stops at the deadline
-    if the machine turns out slower than probed. An existing run keeps the step count it was started with;
-    a run cut short by its deadline counts as complete.
+    Give `steps`, or `minutes`: a budget of CPU time (this process, all threads) for the optimisation. The
+    planned step count (and so the LR schedule) comes from a short timing probe (`time_training_step`), and
+    the trainer stops at the budget if the steps turn out dearer than probed. An existing run keeps the step
+    count and budget it was started with; a run stopped by its budget counts as complete. Without
+    `ckpt_every`, the run checkpoints `n_checkpoints` times, evenly along its planned steps.
     """
     from lano3dp.policy.checkpoint import checkpoint_name, list_checkpoints
-    from lano3dp.train import TrainConfig, policy_config_for_dataset
+    from lano3dp.train import TrainConfig, Trainer, policy_config_for_dataset
 
     run = Path(run)
     saved = run / "train_config.json"
@@ -149,31 +120,34 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
             raise ValueError(f"{run} was started for {config.steps} steps, not {steps}; use another folder "
                              "(or the same step count to resume)")
         done = max((step for step, _ in list_checkpoints(run / "checkpoints")), default=0)
-        if done >= config.steps:
-            log(f"train: {run} is complete ({config.steps} steps); skipping")
-            return run / "checkpoints" / checkpoint_name(config.steps)
+        if done >= config.steps or config.extra.get("stopped_by_budget_at") == done > 0:
+            log(f"train: {run} is complete ({done} steps); skipping")
+            return run / "checkpoints" / checkpoint_name(done)
         log(f"train: resuming {run} at step {done} of {config.steps}")
     else:
         policy_config = policy_config or policy_config_for_dataset(data)
         if steps is None:
             if minutes is None:
                 raise ValueError("train_stage needs steps or minutes")
-            seconds = time_training_step(data, policy_config, batch_size, seed=seed)
+            seconds = time_training_step(data, policy_config, batch_size, seed=seed) * _TRAINING_OVERHEAD
             steps = int(min(max(minutes * 60 / seconds, min_steps), max_steps))
-            log(f"train: {seconds:.3f} s/step measured now -> {steps} steps fit {minutes:g} min")
-        warmup = warmup_steps if warmup_steps is not None else min(500, max(steps // 10, 10))
+            log(f"train: {seconds:.3f} CPU-s/step measured now -> {steps} steps fit {minutes:g} CPU-min")
+        warmup = warmup_steps if warmup_steps is not None else min(500, max(steps // 20, 10))
+        every = ckpt_every or max(1, -(-steps // n_checkpoints))
         config = TrainConfig(data=str(data), out=str(run), policy=policy_config, steps=steps, batch_size=batch_size,
-                             lr=lr, warmup_steps=warmup, ckpt_every=ckpt_every or steps,
-                             val_every=ckpt_every or steps, seed=seed, **train_options)
+                             lr=lr, warmup_steps=warmup, ckpt_every=every, val_every=every, seed=seed,
+                             cpu_minutes=minutes, **train_options)
         log(f"train: {steps} steps, batch {batch_size}, lr {lr:g}, UNet {tuple(policy_config.down_dims)} -> {run}")
     started = time.perf_counter()
-    final, stopped = train_with_deadline(config, minutes * 60 if minutes is not None else None)
-    if stopped:  # the run is complete at the step it reached: record that for re-runs
+    trainer = Trainer(config)
+    final = Path(trainer.run())
+    if trainer.stopped_by_budget:  # complete at the step it reached: record that for re-runs and reports
         planned = json.loads(saved.read_text())
-        extra = {**planned.get("extra", {}), "planned_steps": planned["steps"], "stopped_by_budget_min": minutes}
-        saved.write_text(json.dumps({**planned, "steps": config.steps, "extra": extra}, indent=2))
-        log(f"train: the {minutes:g} min budget ran out at step {config.steps} (planned {planned['steps']})")
-    log(f"train: done in {time.perf_counter() - started:.0f} s -> {final}")
+        extra = {**planned.get("extra", {}), "stopped_by_budget_at": trainer.step}
+        saved.write_text(json.dumps({**planned, "extra": extra}, indent=2))
+        log(f"train: the {config.cpu_minutes:g} CPU-min budget ran out at step {trainer.step} "
+            f"(planned {config.steps})")
+    log(f"train: done in {time.perf_counter() - started:.0f} s wall, {trainer.cpu_seconds:.0f} CPU-s -> {final}")
     return final
 
 

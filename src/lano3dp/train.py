@@ -4,7 +4,8 @@ One code path serves one process and `torchrun --nproc_per_node N` (data-paralle
 nccl on CUDA; rank 0 writes checkpoints and logs). A run folder looks like
 
     <out>/train_config.json
-    <out>/checkpoints/step_XXXXXXX/   (see lano3dp.policy.checkpoint)   <out>/checkpoints/last -> step_...
+    <out>/checkpoints/step_XXXXXXX/   (see lano3dp.policy.checkpoint; progress.json: step, CPU seconds so far)
+    <out>/checkpoints/last -> step_...
     <out>/tensorboard/                 loss, val_loss, lr
 
 Starting `train` on a folder that already has a checkpoint resumes from it (step, raw and EMA
@@ -23,6 +24,7 @@ import json
 import math
 import os
 import sys
+import time
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -73,6 +75,9 @@ class TrainConfig:
         seed: weights, data order and diffusion noise all derive from it.
         num_workers: DataLoader worker processes (0: load in the training process).
         threads: torch intra-op threads (None: leave torch's default).
+        cpu_minutes: a budget of this process's CPU time (all its threads) for the whole run, resumes
+            included; the run stops, checkpointed, at the first step past it. CPU time, not wall time, so a
+            busy machine does not shorten the training (other jobs slow the clock, not the count).
         device: "cpu" or "cuda" ("cuda:<i>" is picked per rank under torchrun).
         bf16: bfloat16 autocast for the forward pass (CPU with AMX: about -19% step time for the small model).
         progress: show a tqdm bar (rank 0).
@@ -100,6 +105,7 @@ class TrainConfig:
     seed: int = 0
     num_workers: int = 0
     threads: int | None = None
+    cpu_minutes: float | None = None
     device: str = "cpu"
     bf16: bool = False
     progress: bool = True
@@ -117,6 +123,8 @@ class TrainConfig:
             raise ValueError("TrainConfig: warmup_steps and num_workers must be >= 0, keep_training_states >= 1")
         if not 0.0 <= self.val_ratio < 1.0:
             raise ValueError(f"TrainConfig: val_ratio must be in [0, 1), got {self.val_ratio}")
+        if self.cpu_minutes is not None and self.cpu_minutes <= 0:
+            raise ValueError(f"TrainConfig: cpu_minutes must be > 0, got {self.cpu_minutes}")
         if self.lr <= 0 or len(self.betas) != 2:
             raise ValueError("TrainConfig: lr must be > 0 and betas a pair")
 
@@ -221,6 +229,8 @@ class Trainer:
         self.ema = EMA(self.policy, config.ema_inv_gamma, config.ema_power, max_value=config.ema_max) \
             if config.ema else None
         self.step = 0
+        self.cpu_seconds = 0.0  # spent on this run by all its sessions (restored on resume)
+        self.stopped_by_budget = False
         if state is not None:
             self._restore(state, resume_from)
         self.model = self.policy
@@ -320,6 +330,7 @@ class Trainer:
             self.ema.model.load_state_dict(ema_policy.state_dict())
             self.ema.optimization_step = int(state.ema.get("optimization_step", state.step))
         self.step = state.step
+        self.cpu_seconds = float(state.extra.get("cpu_s", 0.0))
 
     # ---- loop --------------------------------------------------------------------------
     def _batches(self, epoch: int, skip: int) -> list[list[int]]:
@@ -345,10 +356,11 @@ class Trainer:
         progress = self._progress()
         autocast = (torch.autocast(self.device.type, dtype=torch.bfloat16) if config.bf16 else nullcontext())
         generator = torch.Generator(self.device)
-        last_checkpoint = self.resumed_from if self.resumed_from is not None and self.step >= config.steps else None
+        last_checkpoint = self.resumed_from if self.resumed_from is not None and self._finished() else None
         self.model.train()
+        session_start = time.process_time() - self.cpu_seconds
         try:
-            while self.step < config.steps:
+            while not self._finished():
                 epoch, offset = divmod(self.step, self.steps_per_epoch)
                 for batch in self._loader(self.train_set, self._batches(epoch, offset)):
                     generator.manual_seed(_noise_seed(config.seed, self.rank, self.step))
@@ -363,6 +375,10 @@ class Trainer:
                     if self.ema is not None:
                         self.ema.update(self.policy)
                     self.step += 1
+                    self.cpu_seconds = time.process_time() - session_start
+                    if config.cpu_minutes is not None:
+                        self._agree_on_budget()
+                    last_step = self._finished()
                     value = float(loss.detach())
                     if not math.isfinite(value):
                         raise FloatingPointError(f"training loss became {value} at step {self.step}")
@@ -372,14 +388,13 @@ class Trainer:
                             progress.set_postfix(loss=f"{value:.4f}")
                             writer.add_scalar("loss", value, self.step)
                             writer.add_scalar("lr", lr, self.step)
-                        if self.val_set is not None and (self.step % config.val_every == 0
-                                                         or self.step == config.steps):
+                        if self.val_set is not None and (self.step % config.val_every == 0 or last_step):
                             val_loss = self.validation_loss()
                             writer.add_scalar("val_loss", val_loss, self.step)
                             progress.write(f"step {self.step}: val_loss {val_loss:.4f}")
-                        if self.step % config.ckpt_every == 0 or self.step == config.steps:
+                        if self.step % config.ckpt_every == 0 or last_step:
                             last_checkpoint = self.save_checkpoint()
-                    if self.step >= config.steps:
+                    if last_step:
                         break
             if last_checkpoint is None:
                 last_checkpoint = self.checkpoints / checkpoint_name(self.step)
@@ -392,6 +407,24 @@ class Trainer:
                 dist.barrier()
                 dist.destroy_process_group()
         return last_checkpoint
+
+    def _agree_on_budget(self) -> None:
+        """Stop every rank at the same step: each counts its own CPU time, the first to run out decides."""
+        spent = self.cpu_seconds >= 60 * self.config.cpu_minutes
+        if self.distributed:
+            import torch.distributed as dist
+
+            flag = torch.tensor([float(spent)], device=self.device)
+            dist.all_reduce(flag, op=dist.ReduceOp.MAX)
+            spent = bool(flag.item())
+            if spent:  # the others may be a little under: make them agree
+                self.cpu_seconds = max(self.cpu_seconds, 60 * self.config.cpu_minutes)
+        self.stopped_by_budget = spent and self.step < self.config.steps
+
+    def _finished(self) -> bool:
+        """The planned step count is reached, or the CPU budget is spent."""
+        budget = self.config.cpu_minutes
+        return self.step >= self.config.steps or (budget is not None and self.cpu_seconds >= 60 * budget)
 
     @torch.no_grad()
     def validation_loss(self) -> float:
@@ -419,8 +452,12 @@ class Trainer:
             (self.ema.model if self.ema is not None else self.policy).save_pretrained(folder)
             save_training_state(folder, step=self.step, model=self.policy, optimizer=self.optimizer,
                                 lr_scheduler=self.lr_scheduler, ema=self.ema,
-                                extra={"seed": self.config.seed, "world_size": self.world_size})
+                                extra={"seed": self.config.seed, "world_size": self.world_size,
+                                       "cpu_s": round(self.cpu_seconds, 3)})
             (folder / "train_config.json").write_text(self.config.to_json() + "\n")
+            # what this checkpoint cost; the training state holding the same number is pruned from older ones
+            (folder / "progress.json").write_text(json.dumps({"step": self.step, "cpu_s": round(self.cpu_seconds, 3),
+                                                              "stopped_by_budget": self.stopped_by_budget}) + "\n")
         update_last_pointer(self.checkpoints, final.name)
         prune_training_states(self.checkpoints, self.config.keep_training_states)
         return final

@@ -13,6 +13,7 @@ import typer
 
 
 class Size(StrEnum):
+    compact = "compact"
     small = "small"
     medium = "medium"
     dp = "dp"
@@ -37,15 +38,18 @@ def train_command(
     batch_size: int = typer.Option(64, "--batch-size", help="Windows per step and per process."),
     lr: float = typer.Option(5e-4, help="AdamW peak learning rate (5e-4 suits CPU-length runs)."),
     warmup_steps: int = typer.Option(500, "--warmup-steps", help="Linear warm-up steps before the cosine decay."),
-    size: Size = typer.Option(Size.small, help="UNet widths: small (64,128,256), medium (128,256,512), "
-                                               "dp (256,512,1024)."),
+    minutes: float | None = typer.Option(None, help="Stop, checkpointed, after this many CPU-minutes of this "
+                                                    "process (resumes included); --steps still sizes the LR "
+                                                    "schedule."),
+    size: Size = typer.Option(Size.compact, help="UNet widths: compact (48,96,192), small (64,128,256), "
+                                                 "medium (128,256,512), dp (256,512,1024)."),
     obs_type: ObsType = typer.Option(ObsType.objects, "--obs-type",
                                      help="objects (Lan-o3dp), scene (DP3 baseline) or image (DP baseline)."),
     encoder: Encoder = typer.Option(Encoder.residual, help="Point encoder: residual (paper's best) or mlp (DP3)."),
     n_points: int | None = typer.Option(None, "--n-points", help="Points per object cloud to train on (default: "
                                                                  "all the dataset holds; fewer trains faster)."),
     horizon: int = typer.Option(16, help="Predicted trajectory length H."),
-    n_obs_steps: int = typer.Option(2, "--n-obs-steps", help="Observation steps To the policy sees."),
+    n_obs_steps: int = typer.Option(1, "--n-obs-steps", help="Observation steps To the policy sees."),
     n_action_steps: int = typer.Option(8, "--n-action-steps", help="Actions Ta executed per chunk."),
     seed: int = typer.Option(0, help="Seed of weights, data order and diffusion noise."),
     val_ratio: float = typer.Option(0.05, "--val-ratio", help="Fraction of episodes held out for validation."),
@@ -74,7 +78,7 @@ def train_command(
         policy = policy_config_for_dataset(data, **overrides)
         config = TrainConfig(data=str(data), out=str(out), policy=policy, steps=steps, batch_size=batch_size, lr=lr,
                              warmup_steps=warmup_steps, val_ratio=val_ratio, val_every=val_every,
-                             ckpt_every=ckpt_every, seed=seed, device=device, threads=threads,
+                             ckpt_every=ckpt_every, seed=seed, device=device, threads=threads, cpu_minutes=minutes,
                              num_workers=num_workers, bf16=bf16, ema=ema, progress=progress)
         final = train(config)
     except (Lano3dpError, ValueError, FileNotFoundError) as error:

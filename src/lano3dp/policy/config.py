@@ -1,7 +1,10 @@
 """Configuration of the diffusion policy: a validated dataclass that round-trips through JSON.
 
-Defaults follow the paper's CNN diffusion policy (Chi et al.) on object clouds (DP3 encoder), with a
-small UNet that trains on this CPU (docs: /work/shared/notes/cpu-cost.md).
+Defaults follow the paper's CNN diffusion policy (Chi et al.) on object clouds (DP3 encoder), sized so
+that a training sample costs about a quarter of the CPU time of the first default (2 x 128 points, two
+observation steps, encoder widths 64-128-256, UNet 64-128-256): fewer points, one observation step, a
+narrower point MLP and UNet. `bench/bench_policy.py` measures both side by side, and
+`bench/bench_learning.py` what they learn per CPU-minute.
 """
 
 from __future__ import annotations
@@ -16,8 +19,11 @@ OBS_TYPES = ("objects", "scene", "image")
 POINT_ENCODERS = ("residual", "mlp")
 INFERENCE_SCHEDULERS = ("ddpm", "ddim")
 
-# UNet widths by name. "small" is the CPU default (5.4 M parameters), "dp" is Chi et al.'s real-robot size.
+# UNet widths by name. "compact" is the CPU default (2.9 M parameters with the default encoder; its fp16
+# weights fit the 6 MB a packaged checkpoint may take), "small" the earlier default (5.9 M), "dp" Chi et
+# al.'s real-robot size. bench/bench_policy.py measures what each costs per training sample.
 DOWN_DIMS_PRESETS: dict[str, tuple[int, ...]] = {
+    "compact": (48, 96, 192),
     "small": (64, 128, 256),
     "medium": (128, 256, 512),
     "dp": (256, 512, 1024),
@@ -45,7 +51,8 @@ class PolicyConfig:
         down_dims: UNet channel widths per level; see DOWN_DIMS_PRESETS.
         diffusion_step_embed_dim, kernel_size, n_groups: UNet step embedding, Conv1d kernel, GroupNorm groups.
         point_encoder: "residual" (the paper's best: 68.8% vs 64.1%) or "mlp" (DP3's encoder).
-        point_hidden_dims: widths of the shared per-point MLP (DP3: 64, 128, 256).
+        point_hidden_dims: widths of the shared per-point MLP (DP3: 64, 128, 256; default half that: the
+            per-point MLP was over half of a training step, and the task objects are simple shapes).
         encoder_out: feature size of each cloud (per object slot) and of the image.
         state_feature_dim: feature size of the state MLP.
         num_train_timesteps, beta_schedule, prediction_type, clip_sample: the diffusion process.
@@ -55,20 +62,20 @@ class PolicyConfig:
 
     obs_type: str = "objects"
     object_names: tuple[str, ...] = ()
-    n_points: int = 256
+    n_points: int = 64
     scene_points: int = 512
     image_size: int = 96
     state_dim: int = 11
     action_dim: int = 10
-    n_obs_steps: int = 2
+    n_obs_steps: int = 1
     horizon: int = 16
     n_action_steps: int = 8
-    down_dims: tuple[int, ...] = DOWN_DIMS_PRESETS["small"]
-    diffusion_step_embed_dim: int = 128
+    down_dims: tuple[int, ...] = DOWN_DIMS_PRESETS["compact"]
+    diffusion_step_embed_dim: int = 64
     kernel_size: int = 5
     n_groups: int = 8
     point_encoder: str = "residual"
-    point_hidden_dims: tuple[int, ...] = (64, 128, 256)
+    point_hidden_dims: tuple[int, ...] = (32, 64, 128)
     encoder_out: int = 64
     state_feature_dim: int = 64
     num_train_timesteps: int = 100

@@ -1,0 +1,195 @@
+"""Success against CPU-minutes of training, per task and training recipe.
+
+Per task and recipe (`--recipes`, from RECIPES below) and training seed:
+  1. collect `--demos` scripted-expert demonstrations of clean scenes, with the recipe's points per object;
+  2. train for a budget of `--minutes` CPU-minutes (this process's CPU time, so other jobs on the machine
+     change the wall time, not the number of steps), checkpointing `--checkpoints` times along the way;
+  3. evaluate every checkpoint on clean episodes under the simulator's motion limits: `--episodes` at the
+     final checkpoint, `--curve-episodes` at the earlier ones.
+
+Resumable: datasets grow to size, training resumes from its last checkpoint, an evaluation whose JSON exists
+with the same configuration is skipped. Outputs:
+    <work>/...                         datasets, runs, per-evaluation JSONs (large; not committed)
+    results/learning<tag>.json         every number with its 95% interval, CPU-minutes, seeds and the command
+    results/learning<tag>.png          success against CPU-minutes, one panel per task
+
+One process per task over one --work folder uses both cores:
+
+    OMP_NUM_THREADS=1 python bench/bench_learning.py --tasks open_drawer --recipes compact,previous --minutes 10
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import shlex
+import sys
+import time
+from pathlib import Path
+
+import torch
+
+from lano3dp.evaluate import EvalConfig, write_json
+from lano3dp.pipeline import collect_stage, eval_stage, train_stage
+from lano3dp.policy.checkpoint import list_checkpoints
+from lano3dp.report import wilson_interval
+from lano3dp.train import policy_config_for_dataset
+
+ROOT = Path(__file__).resolve().parent.parent
+PAPER_TASKS = ("open_drawer", "open_wine_bottle", "sweep_to_dustpan", "phone_on_base", "put_item_in_drawer",
+               "water_plants", "close_microwave", "bowl_pour", "bottle_upright", "bottle_in_drawer")
+# Policy settings per recipe; everything else (optimiser, schedule, EMA) is shared. "previous" is the
+# default before the learning-efficiency work (d63c154), kept to measure the new one against.
+RECIPES = {
+    "compact": {"points": 64, "policy": {}},
+    "previous": {"points": 128, "policy": dict(n_obs_steps=2, down_dims=(64, 128, 256),
+                                               point_hidden_dims=(64, 128, 256), diffusion_step_embed_dim=128)},
+}
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--tasks", default=",".join(PAPER_TASKS), help="comma-separated simulator tasks")
+    parser.add_argument("--recipes", default="compact", help=f"comma-separated, from {sorted(RECIPES)}")
+    parser.add_argument("--seeds", default="0", help="comma-separated training seeds")
+    parser.add_argument("--demos", type=int, default=40)
+    parser.add_argument("--minutes", type=float, default=20.0, help="training budget, CPU-minutes")
+    parser.add_argument("--checkpoints", type=int, default=4, help="checkpoints (and evaluations) along training")
+    parser.add_argument("--episodes", type=int, default=50, help="evaluation episodes of the final checkpoint")
+    parser.add_argument("--curve-episodes", type=int, default=20, help="evaluation episodes of earlier checkpoints")
+    parser.add_argument("--batch-size", type=int, default=64)
+    parser.add_argument("--lr", type=float, default=1e-3)
+    parser.add_argument("--threads", type=int, default=1)
+    parser.add_argument("--work", type=Path, default=ROOT / "bench" / "out" / "learning")
+    parser.add_argument("--tag", default="", help="suffix of the results files")
+    parser.add_argument("--report-only", action="store_true", help="tabulate what --work holds; run nothing")
+    return parser.parse_args(argv)
+
+
+def run_cell(args, task: str, recipe: str, seed: int, log) -> None:
+    settings = RECIPES[recipe]
+    data = collect_stage(task, args.demos, args.work / "data" / f"{task}_{settings['points']}pts.zarr", log=log,
+                         seed=0, n_points=settings["points"], progress=False)
+    run = args.work / "runs" / f"{task}_{recipe}_seed{seed}"
+    policy = policy_config_for_dataset(data, **settings["policy"])
+    train_stage(data, run, policy_config=policy, minutes=args.minutes, n_checkpoints=args.checkpoints,
+                batch_size=args.batch_size, lr=args.lr, seed=seed, threads=args.threads, progress=False, log=log)
+    checkpoints = list_checkpoints(run / "checkpoints")
+    for index, (step, folder) in enumerate(checkpoints):
+        final = index == len(checkpoints) - 1
+        config = EvalConfig(checkpoint=str(folder), task=task, variation="clean",
+                            episodes=args.episodes if final else args.curve_episodes, workers=1,
+                            out=str(args.work / "eval" / f"{run.name}_step{step}.json"))
+        result = eval_stage(config, log=log)
+        log(f"eval {run.name} step {step}: {result['summary']['success_rate']:.0%} of {config.episodes}")
+
+
+def collect_report(args, tasks, recipes, seeds) -> dict:
+    """Every evaluated checkpoint in --work, as curves of success against CPU-minutes."""
+    cells = []
+    for task in tasks:
+        for recipe in recipes:
+            for seed in seeds:
+                run = args.work / "runs" / f"{task}_{recipe}_seed{seed}"
+                if not run.exists():
+                    continue
+                curve = []
+                for step, folder in list_checkpoints(run / "checkpoints"):
+                    path = args.work / "eval" / f"{run.name}_step{step}.json"
+                    if not path.exists():
+                        continue
+                    summary = json.loads(path.read_text())["summary"]
+                    progress = json.loads((folder / "progress.json").read_text())
+                    successes = round(summary["success_rate"] * summary["episodes"])
+                    low, high = wilson_interval(successes, summary["episodes"])
+                    curve.append({"step": step, "cpu_minutes": round(progress["cpu_s"] / 60, 2),
+                                  "episodes": summary["episodes"], "successes": successes,
+                                  "success_rate": summary["success_rate"], "ci95": [low, high],
+                                  "stages": summary.get("stages")})
+                if not curve:
+                    continue
+                train_config = json.loads((run / "train_config.json").read_text())
+                cells.append({"task": task, "recipe": recipe, "seed": seed, "final": curve[-1], "curve": curve,
+                              "planned_steps": train_config["steps"], "batch_size": train_config["batch_size"],
+                              "lr": train_config["lr"], "policy": train_config["policy"]})
+    return {"cells": cells}
+
+
+def plot(path: Path, report: dict) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    tasks = list(dict.fromkeys(cell["task"] for cell in report["cells"]))
+    if not tasks:
+        return
+    columns = min(len(tasks), 5)
+    rows = -(-len(tasks) // columns)
+    figure, axes = plt.subplots(rows, columns, figsize=(3.2 * columns, 2.8 * rows), squeeze=False, sharey=True)
+    for axis, task in zip(axes.flat, tasks, strict=False):
+        for cell in (c for c in report["cells"] if c["task"] == task):
+            x = [p["cpu_minutes"] for p in cell["curve"]]
+            y = [100 * p["success_rate"] for p in cell["curve"]]
+            low = [100 * p["ci95"][0] for p in cell["curve"]]
+            high = [100 * p["ci95"][1] for p in cell["curve"]]
+            line, = axis.plot(x, y, marker="o", label=f"{cell['recipe']} s{cell['seed']}")
+            axis.fill_between(x, low, high, color=line.get_color(), alpha=0.15)
+        axis.set_title(task, fontsize=9)
+        axis.set_xlabel("training, CPU-minutes")
+        axis.set_ylim(-2, 102)
+        axis.grid(alpha=0.3)
+    axes[0, 0].set_ylabel("success, % (95% CI)")
+    axes[0, 0].legend(fontsize=7)
+    for axis in list(axes.flat)[len(tasks):]:
+        axis.axis("off")
+    figure.tight_layout()
+    figure.savefig(path, dpi=110)
+    plt.close(figure)
+
+
+def main(argv=None) -> None:
+    args = parse_args(argv)
+    tasks = [t for t in args.tasks.split(",") if t]
+    recipes = [r for r in args.recipes.split(",") if r]
+    unknown = sorted(set(recipes) - set(RECIPES))
+    if unknown:
+        sys.exit(f"unknown recipe(s) {unknown}; choose from {sorted(RECIPES)}")
+    seeds = [int(s) for s in args.seeds.split(",") if s]
+    torch.set_num_threads(args.threads)
+    started = time.time()
+
+    def log(message: str) -> None:
+        print(f"[{time.time() - started:7.0f}s] {message}", flush=True)
+
+    if not args.report_only:
+        for task in tasks:
+            for recipe in recipes:
+                for seed in seeds:
+                    run_cell(args, task, recipe, seed, log)
+    report = collect_report(args, tasks, recipes, seeds)
+    report = {"command": "OMP_NUM_THREADS=1 python bench/bench_learning.py " + shlex.join(sys.argv[1:] if argv is None
+                                                                                          else argv),
+              "benchmark": "bench/bench_learning.py",
+              "when_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+              "machine": {"processor": platform.processor() or platform.machine(), "torch": torch.__version__,
+                          "threads": args.threads},
+              "setup": {"demos": args.demos, "cpu_minutes": args.minutes, "checkpoints": args.checkpoints,
+                        "final_episodes": args.episodes, "curve_episodes": args.curve_episodes,
+                        "recipes": {name: RECIPES[name] for name in recipes}, "seeds": seeds,
+                        "evaluation": "clean scenes, seeds 1000000 + i, under the simulator's motion limits"},
+              **report}
+    out = ROOT / "results" / f"learning{args.tag}.json"
+    write_json(out, report)
+    plot(out.with_suffix(".png"), report)
+    for cell in report["cells"]:
+        final = cell["final"]
+        print(f"{cell['task']:<20} {cell['recipe']:<9} seed {cell['seed']}: {final['success_rate']:.0%} "
+              f"({final['successes']}/{final['episodes']}) at {final['cpu_minutes']:.1f} CPU-min, step {final['step']}")
+    print(out)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,156 +1,213 @@
-"""Benchmark the diffusion policy on this machine: training steps/s and inference latency.
+"""Where a training step's CPU time goes, per policy configuration and observation type; inference latency.
 
-Training step = what lano3dp.train does per step: observation encoding, UNet forward/backward, fused
-AdamW, EMA update (random tensors of the right shapes, so data loading is not included).
-Inference = predict_action_chunk at batch 1: DDPM-100, DDIM-10, and DDIM-10 with cost guidance on
-every step (a cylinder-like hinge cost on the xy distance, written inline).
+A training step is split as lano3dp.train runs it: data loading (windows from a SequenceDataset over a
+zarr store of random episodes, collated), point or image encoder, state encoder, UNet and loss forward,
+then the backward of each of them (autograd is stopped at the encoders' outputs so each part is timed
+alone), fused AdamW and the EMA update. Each part is reported in CPU milliseconds per training sample
+(process CPU time, `time.process_time`, median over steps), and the configurations are measured side by
+side in one run so that their ratio holds even on a busy machine:
 
-    OMP_NUM_THREADS=2 python bench/bench_policy.py [--threads 2] [--size small] [--out results/bench_policy.json]
+    previous   the default before the learning-efficiency work (d63c154): 2 x 128 points, 2 observation
+               steps, point MLP 64-128-256, UNet 64-128-256, step embedding 128 (5.9 M parameters)
+    default    PolicyConfig() today (lano3dp.policy.config)
 
-Timings are wall-clock medians, with the process CPU time beside them; the machine may be shared, so
-the load average before and after is recorded with them. With one thread and a busy machine, the CPU
-time is the better estimate of the quiet wall time.
+Inference = predict_action_chunk at batch 1 of the default: DDIM-10, DDPM-100, and DDIM-10 with cost
+guidance on every step.
+
+    OMP_NUM_THREADS=1 python bench/bench_policy.py [--threads 1] [--out results/bench_policy.json]
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import platform
+import shlex
 import statistics
+import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
+import torch.nn.functional as F
+from torch.utils.data import default_collate
 
+from lano3dp.data import EpisodeStore, SequenceDataset
+from lano3dp.evaluate import write_json
 from lano3dp.guidance import GuidanceConfig
-from lano3dp.policy import DiffusionPolicy, PolicyConfig, down_dims_for
+from lano3dp.policy import DiffusionPolicy, PolicyConfig
 from lano3dp.policy.checkpoint import EMA
 
+SLOTS = ("object_0", "object_1")
+CONFIGS = {
+    "previous": dict(n_points=128, n_obs_steps=2, down_dims=(64, 128, 256), point_hidden_dims=(64, 128, 256),
+                     diffusion_step_embed_dim=128),
+    "default": {},
+}
+PARTS = ("data", "visual_forward", "state_forward", "unet_loss_forward", "unet_loss_backward", "visual_backward",
+         "state_backward", "optimizer", "ema")
 
-def make_policy(size: str, n_objects: int, encoder: str) -> DiffusionPolicy:
+
+def make_policy(obs_type: str, **changes) -> DiffusionPolicy:
     torch.manual_seed(0)
-    config = PolicyConfig(object_names=tuple(f"object_{i}" for i in range(n_objects)), down_dims=down_dims_for(size),
-                          point_encoder=encoder)
+    config = PolicyConfig(obs_type=obs_type, object_names=SLOTS if obs_type == "objects" else (), **changes)
     policy = DiffusionPolicy(config)
-    ones = {"min": -np.ones(3), "max": np.ones(3)}
-    policy.set_normalizer({"action": {"min": -np.ones(10), "max": np.ones(10)},
-                           "state": {"min": -np.ones(11), "max": np.ones(11)}, "object_clouds": ones})
+    stats = {"action": {"min": -np.ones(10), "max": np.ones(10)}, "state": {"min": -np.ones(11), "max": np.ones(11)}}
+    if obs_type != "image":
+        stats[config.visual_key] = {"min": -np.ones(3), "max": np.ones(3)}
+    policy.set_normalizer(stats)
     return policy
 
 
-def random_obs(config: PolicyConfig, batch: int, n_points: int, generator: torch.Generator) -> dict:
-    clouds = torch.rand(batch, config.n_obs_steps, config.n_slots, n_points, 3, generator=generator) * 0.4 - 0.2
-    state = torch.rand(batch, config.n_obs_steps, config.state_dim, generator=generator) * 2 - 1
-    return {"object_clouds": clouds, "state": state}
+def random_store(path: Path, config: PolicyConfig, episodes: int = 12, length: int = 80) -> EpisodeStore:
+    """A zarr store of random episodes with the keys and shapes `config` reads (the values do not matter)."""
+    rng = np.random.default_rng(0)
+    store = EpisodeStore.create(path, attrs={"object_names": list(config.object_names)})
+    visual = {"objects": (config.n_slots, config.n_points, 3), "scene": (config.scene_points, 3),
+              "image": (config.image_size, config.image_size, 3)}[config.obs_type]
+    for _ in range(episodes):
+        episode = {"state": rng.random((length, config.state_dim), dtype=np.float32),
+                   "action": rng.random((length, config.action_dim), dtype=np.float32)}
+        if config.obs_type == "image":
+            episode["rgb"] = rng.integers(0, 255, (length, *visual), dtype=np.uint8)
+        else:
+            episode[config.visual_key] = rng.random((length, *visual), dtype=np.float32) * 0.4 - 0.2
+        store.append_episode(episode)
+    return store
 
 
-def time_training(policy: DiffusionPolicy, batch: int, n_points: int, steps: int, bf16: bool) -> tuple[list, list]:
+def time_training(policy: DiffusionPolicy, dataset: SequenceDataset, batch: int, steps: int) -> dict[str, float]:
+    """Median CPU seconds of each part of a training step (see the module docstring)."""
+    config = policy.config
     generator = torch.Generator().manual_seed(0)
+    rng = np.random.default_rng(0)
     optimizer = torch.optim.AdamW(policy.parameters(), lr=5e-4, betas=(0.95, 0.999), weight_decay=1e-6, fused=True)
     ema = EMA(policy)
-    data = {"obs": random_obs(policy.config, batch, n_points, generator),
-            "action": torch.rand(batch, policy.config.horizon, 10, generator=generator) * 2 - 1}
-    durations, cpu = [], []
+    encoder = policy.obs_encoder
+    times: dict[str, list[float]] = {part: [] for part in PARTS}
     for step in range(steps + 3):  # the first steps warm up oneDNN's kernels
-        start, start_cpu = time.perf_counter(), time.process_time()
-        with torch.autocast("cpu", dtype=torch.bfloat16, enabled=bf16):
-            loss = policy.compute_loss(data, generator=generator)
+        marks = [time.process_time()]
+        data = default_collate([dataset[int(i)] for i in rng.integers(0, len(dataset), batch)])
+        marks.append(time.process_time())
+        obs = policy._prepare_obs(data["obs"])
+        visual = encoder.visual(obs[config.visual_key].flatten(0, 1))
+        marks.append(time.process_time())
+        state = encoder.state(obs["state"].flatten(0, 1))
+        marks.append(time.process_time())
+        visual_out, state_out = visual.detach().requires_grad_(), state.detach().requires_grad_()
+        cond = torch.cat([visual_out, state_out], dim=-1).reshape(batch, -1)
+        trajectory = policy.normalizer.normalize("action", data["action"].float())
+        noise = torch.randn(trajectory.shape, generator=generator)
+        timesteps = torch.randint(0, config.num_train_timesteps, (batch,), generator=generator)
+        loss = F.mse_loss(policy.unet(policy.noise_scheduler.add_noise(trajectory, noise, timesteps), timesteps,
+                                      cond), noise)
+        marks.append(time.process_time())
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
+        marks.append(time.process_time())
+        visual.backward(visual_out.grad)
+        marks.append(time.process_time())
+        state.backward(state_out.grad)
+        marks.append(time.process_time())
         optimizer.step()
+        marks.append(time.process_time())
         ema.update(policy)
+        marks.append(time.process_time())
         if step >= 3:
-            durations.append(time.perf_counter() - start)
-            cpu.append(time.process_time() - start_cpu)
-    return durations, cpu
+            for part, begin, end in zip(PARTS, marks[:-1], marks[1:], strict=True):
+                times[part].append(end - begin)
+    return {part: statistics.median(values) for part, values in times.items()}
 
 
-def time_inference(policy: DiffusionPolicy, n_points: int, repeats: int, **kwargs) -> tuple[list, list]:
+def time_inference(policy: DiffusionPolicy, repeats: int, **kwargs) -> dict[str, float]:
+    config = policy.config
     generator = torch.Generator().manual_seed(0)
-    obs = random_obs(policy.config, 1, n_points, generator)
-    durations, cpu = [], []
+    obs = {"object_clouds": torch.rand(1, config.n_obs_steps, config.n_slots, config.n_points, 3) * 0.4 - 0.2,
+           "state": torch.rand(1, config.n_obs_steps, config.state_dim) * 2 - 1}
+    wall, cpu = [], []
     for index in range(repeats + 1):
         start, start_cpu = time.perf_counter(), time.process_time()
         policy.predict_action_chunk(obs, generator=generator, **kwargs)
         if index:
-            durations.append(time.perf_counter() - start)
+            wall.append(time.perf_counter() - start)
             cpu.append(time.process_time() - start_cpu)
-    return durations, cpu
+    return {"median_cpu_s": statistics.median(cpu), "median_wall_s": statistics.median(wall), "n": len(cpu)}
 
 
 def hinge_cost(positions: torch.Tensor) -> torch.Tensor:
     """(B, H, 3) -> (B,): sum of max(0, 0.1 m - xy distance to an obstacle at the origin)."""
-    distance = positions[..., :2].norm(dim=-1)
-    return torch.relu(0.1 - distance).sum(dim=-1)
+    return torch.relu(0.1 - positions[..., :2].norm(dim=-1)).sum(dim=-1)
 
 
-def summary(timings: tuple[list, list]) -> dict:
-    """Wall-clock median/min/max, and the median process CPU time (the sum over threads)."""
-    durations, cpu = timings
-    return {"median_s": statistics.median(durations), "min_s": min(durations), "max_s": max(durations),
-            "median_cpu_s": statistics.median(cpu), "n": len(durations)}
-
-
-def main() -> None:
+def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--threads", type=int, default=2)
-    parser.add_argument("--size", default="small", choices=["small", "medium", "dp"])
-    parser.add_argument("--encoder", default="residual", choices=["residual", "mlp"])
+    parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--batch", type=int, default=64)
-    parser.add_argument("--n-points", type=int, default=256, help="points per object")
-    parser.add_argument("--n-objects", type=int, default=2)
-    parser.add_argument("--train-steps", type=int, default=20)
+    parser.add_argument("--train-steps", type=int, default=12)
+    parser.add_argument("--obs-types", default="objects,scene,image")
     parser.add_argument("--repeats", type=int, default=10, help="inference repetitions (DDPM-100: a third)")
     parser.add_argument("--out", type=Path, default=Path(__file__).resolve().parents[1] / "results" /
                         "bench_policy.json")
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
     load_before = os.getloadavg()
     started = time.time()
+    training: dict[str, dict] = {}
+    with tempfile.TemporaryDirectory() as folder:
+        for obs_type in args.obs_types.split(","):
+            for name, changes in CONFIGS.items():
+                policy = make_policy(obs_type, **changes).train()
+                config = policy.config
+                store = random_store(Path(folder) / f"{obs_type}_{name}.zarr", config)
+                dataset = SequenceDataset(store, obs_keys=config.obs_keys, n_obs_steps=config.n_obs_steps,
+                                          horizon=config.horizon, n_action_steps=config.n_action_steps)
+                parts = time_training(policy, dataset, args.batch, args.train_steps)
+                total = sum(parts.values())
+                entry = {"parameters": sum(p.numel() for p in policy.parameters()),
+                         "config": {key: config.to_dict()[key] for key in ("n_points", "n_obs_steps", "down_dims",
+                                                                            "point_hidden_dims",
+                                                                            "diffusion_step_embed_dim")},
+                         "cpu_s_per_step": total, "cpu_ms_per_sample": 1000 * total / args.batch,
+                         "cpu_ms_per_sample_by_part": {k: 1000 * v / args.batch for k, v in parts.items()}}
+                training[f"{obs_type}/{name}"] = entry
+                print(f"{obs_type:8s} {name:9s} {entry['parameters'] / 1e6:5.2f} M  {total:.3f} CPU-s/step  "
+                      f"{entry['cpu_ms_per_sample']:.2f} ms/sample  " + " ".join(
+                          f"{k} {v:.2f}" for k, v in entry["cpu_ms_per_sample_by_part"].items()), flush=True)
+    ratios = {obs_type: training[f"{obs_type}/previous"]["cpu_ms_per_sample"] /
+              training[f"{obs_type}/default"]["cpu_ms_per_sample"] for obs_type in args.obs_types.split(",")}
+    print("previous / default, CPU per training sample: " + ", ".join(f"{k} {v:.2f}x" for k, v in ratios.items()))
 
-    policy = make_policy(args.size, args.n_objects, args.encoder)
-    parameters = sum(p.numel() for p in policy.parameters())
-    results: dict = {"training": {}, "inference_batch1": {}}
-    for bf16 in (False, True):
-        entry = summary(time_training(policy.train(), args.batch, args.n_points, args.train_steps, bf16))
-        entry["steps_per_s"] = 1.0 / entry["median_s"]
-        results["training"]["bf16_autocast" if bf16 else "fp32"] = entry
-        print(f"train {'bf16' if bf16 else 'fp32'}: {entry['steps_per_s']:.2f} steps/s "
-              f"({entry['median_s'] * 1000:.0f} ms/step)", flush=True)
-    policy.eval()
+    policy = make_policy("objects").eval()
     cases = {
         "ddim_10": dict(scheduler="ddim", num_inference_steps=10),
         "ddpm_100": dict(scheduler="ddpm", num_inference_steps=100),
         "ddim_10_guided_every_step": dict(scheduler="ddim", num_inference_steps=10, position_cost=hinge_cost,
                                           guidance=GuidanceConfig(scale=0.01, last_steps=100)),
     }
+    inference = {}
     for name, kwargs in cases.items():
         repeats = max(3, args.repeats // 3) if name.startswith("ddpm") else args.repeats
-        entry = summary(time_inference(policy, args.n_points, repeats, **kwargs))
-        results["inference_batch1"][name] = entry
-        print(f"{name}: {entry['median_s'] * 1000:.1f} ms", flush=True)
+        inference[name] = time_inference(policy, repeats, **kwargs)
+        print(f"inference {name}: {1000 * inference[name]['median_cpu_s']:.1f} CPU-ms", flush=True)
 
     record = {
         "benchmark": "bench/bench_policy.py",
-        "command": f"OMP_NUM_THREADS={args.threads} python bench/bench_policy.py --threads {args.threads} "
-                   f"--size {args.size} --batch {args.batch} --n-points {args.n_points} --n-objects {args.n_objects}",
+        "command": "OMP_NUM_THREADS=1 python bench/bench_policy.py " + shlex.join(sys.argv[1:] if argv is None
+                                                                                  else argv),
         "when_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(started)),
         "machine": {"cpu_count": os.cpu_count(), "processor": platform.processor() or platform.machine(),
                     "torch": torch.__version__, "threads": torch.get_num_threads(),
                     "load_average_before": load_before, "load_average_after": os.getloadavg()},
-        "setup": {"size": args.size, "down_dims": list(policy.config.down_dims), "encoder": args.encoder,
-                  "parameters": parameters, "batch": args.batch, "objects": args.n_objects,
-                  "points_per_object": args.n_points, "horizon": policy.config.horizon,
-                  "n_obs_steps": policy.config.n_obs_steps},
-        "results": results,
-        "note": "wall-clock medians on a machine shared with other jobs; compare with the load averages. "
-                "median_cpu_s is process CPU time (all threads).",
+        "batch": args.batch,
+        "training": training,
+        "previous_over_default_cpu_per_sample": ratios,
+        "inference_batch1_default_objects": inference,
+        "note": "process CPU time (all threads), medians; both configurations measured in this one run. "
+                "Backward parts: autograd stopped at the encoders' outputs, so each part is timed alone.",
     }
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(record, indent=2) + "\n")
+    write_json(args.out, record)
     print(f"wrote {args.out}")
 
 

@@ -222,7 +222,7 @@ def _compact(summary: dict) -> dict:
     keep = ("episodes", "episodes_with_obstacles", "successes", "success_rate", "collision_rate",
             "mean_collision_steps", "safe_success_rate",
             "mean_min_clearance",
-            "error_rate", "latency_mean_s")
+            "error_rate", "latency_mean_s", "stage_rates")
     return {k: summary.get(k) for k in keep}
 
 

@@ -3,6 +3,7 @@
     result = evaluate(EvalConfig(checkpoint="runs/bowl", task="bowl_pour", variation="obstacle",
                                  episodes=20, guidance="clean", rho=0.5))
     result["summary"]["success_rate"], result["summary"]["collision_rate"]
+    result["summary"]["stage_rates"]   # e.g. {"reached_handle": 0.9, "grasped_handle": 0.6, ..., "opened": 0.4}
 
 Each episode is a fresh `TabletopEnv` scene from its seed (seed, seed + 1, ...; the default first
 seed 1000000 keeps evaluation scenes apart from demonstration seeds: 0, 1, ... and their retries
@@ -265,6 +266,26 @@ def _worker_run(job: tuple[int, int, str | None]) -> tuple[int, dict[str, Any]]:
 
 
 # ---- the whole evaluation ------------------------------------------------------------------------
+def stage_breakdown(episodes: Sequence[dict[str, Any]]) -> tuple[dict[str, float], dict[str, int]]:
+    """Where episodes fail: (stage -> fraction of episodes that reached it, furthest stage -> episodes that
+    got that far and no further, with "none" for those that reached no stage), both in the task's order.
+
+    Records without stages (results made before tasks had them) count as reaching none; with no record
+    holding stages both are empty.
+    """
+    order = next((list(e["stages"]) for e in episodes if e.get("stages")), [])
+    if not order:
+        return {}, {}
+    n = len(episodes)
+    rates = {stage: round(sum(bool((e.get("stages") or {}).get(stage)) for e in episodes) / n, 4)
+             for stage in order}
+    furthest = {stage: 0 for stage in ["none", *order]}
+    for e in episodes:
+        key = e.get("stage") or "none"
+        furthest[key] = furthest.get(key, 0) + 1
+    return rates, furthest
+
+
 def summarize(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
     """Aggregate per-episode records into rates and means (clearance only over episodes that measured one)."""
     n = len(episodes)
@@ -278,6 +299,7 @@ def summarize(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
         values = list(values)
         return round(float(np.mean(values)), 5) if values else None
 
+    stage_rates, furthest_stages = stage_breakdown(episodes)
     return {
         "episodes": n,
         "successes": sum(bool(e["success"]) for e in episodes),
@@ -298,6 +320,8 @@ def summarize(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
         "latency_p95_s": round(float(np.quantile(latencies, 0.95)), 5) if latencies.size else None,
         "mean_tries": mean(t for e in episodes for t in e["chunk_tries"]),
         "errors": sorted({e["error"].split(":")[0] for e in episodes if e["error"]}),
+        "stage_rates": stage_rates,
+        "furthest_stages": furthest_stages,
     }
 
 

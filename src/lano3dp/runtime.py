@@ -488,6 +488,9 @@ class EpisodeResult:
         targets: phrase -> centroid (m) of each target's cloud in the first frame (object policies).
         error: why the episode ended early (perception failure, no clear chunk), or None.
         wall_s: wall time of the episode, seconds.
+        stages: the task's stages in order -> reached during the episode (the env's last info["stages"];
+            empty when the env reports none).
+        stage: the furthest stage reached, or None.
     """
 
     seed: int
@@ -508,6 +511,8 @@ class EpisodeResult:
     error: str | None = None
     wall_s: float = 0.0
     info: dict[str, Any] = field(default_factory=dict)
+    stages: dict[str, bool] = field(default_factory=dict)
+    stage: str | None = None
 
     def to_dict(self, include_path: bool = False) -> dict[str, Any]:
         data = asdict(self)
@@ -615,4 +620,6 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
         held_radius=runner.held_radius, held_clouds=runner.held_clouds,
         targets=dict(runner.initial_targets), error=error,
         wall_s=time.perf_counter() - started,
+        # The env latches stages, so its last info holds every stage reached in the episode.
+        stages={stage: bool(flag) for stage, flag in (info.get("stages") or {}).items()}, stage=info.get("stage"),
     )

@@ -75,6 +75,8 @@ def eval_command(
         result = evaluate(config, progress=progress, command=command_line(ctx))
     console.print(summary_line(result["summary"]))
     summary = result["summary"]
+    if summary.get("stage_rates"):
+        console.print(stage_line(summary))
     if summary["errors"]:
         console.print(f"[yellow]episodes ended by errors:[/yellow] {', '.join(summary['errors'])}")
     console.print(f"results: {out}")
@@ -90,6 +92,11 @@ def summary_line(summary: dict) -> str:
     if summary["latency_mean_s"] is not None:
         parts.append(f"latency {summary['latency_mean_s'] * 1000:.0f} ms/chunk")
     return ", ".join(parts)
+
+
+def stage_line(summary: dict) -> str:
+    """One human line for the per-stage breakdown: the share of episodes reaching each stage, in order."""
+    return "stages reached: " + " > ".join(f"{stage} {rate:.0%}" for stage, rate in summary["stage_rates"].items())
 
 
 def command_line(ctx: typer.Context) -> str:

@@ -25,7 +25,9 @@ gripper or held object with obstacles during this step: dicts with obstacle, bod
 "n_obstacle_contacts" (episode total), "min_obstacle_clearance" (metres at the end of the step;
 inf without obstacles; negative = penetration: the hand follows its target through a stiff
 weld, so a target inside an obstacle pushes the hand centimetres into it), "held_object",
-"seed", "variation", "instruction", "target_phrases", "slot_objects" (slot -> scene object name).
+"seed", "variation", "instruction", "target_phrases", "slot_objects" (slot -> scene object name),
+"stages" (the task's stages in order -> reached at some step of this episode: latched, judged
+after every step like success) and "stage" (the furthest of them reached, or None).
 Reward: 1.0 on success, else 0.0; `terminated` on success, `truncated` at `max_steps`.
 """
 
@@ -46,7 +48,7 @@ from lano3dp.sim.render import FusedRenderer
 from lano3dp.sim.robot import GripperHandle, GripperSpec, rot6d
 from lano3dp.sim.scene import FRONT_CAMERA, SHIFTED_CAMERA, TIMESTEP, CameraPose, SceneBuilder
 from lano3dp.sim.tasks import make_task
-from lano3dp.sim.tasks.base import Layout, SimState, Task
+from lano3dp.sim.tasks.base import Layout, SimState, Task, furthest_stage
 from lano3dp.sim.variations import SceneExtras, Variation, sample_extras
 
 WORKSPACE_LOW = np.array([0.05, -0.55, 0.0])
@@ -167,6 +169,7 @@ class TabletopEnv(gym.Env):
         self._steps = 0
         self._n_contacts = 0
         self._success = False
+        self._stages = dict.fromkeys(self.task.stages, False)
         self._frame = None
         obs = self._observe()
         return obs, self._info(clipped=False, contacts=[], clearance=self._clearance())
@@ -355,8 +358,21 @@ class TabletopEnv(gym.Env):
         """The observation camera (PinholeCamera) of the current episode."""
         return self._images.camera
 
+    def _latch_stages(self) -> dict[str, bool]:
+        """Stages reached so far this episode. Judged after each step (not at reset, like success), and
+        a stage once reached stays reached: "grasped" still counts after the object is put down."""
+        if self._steps:
+            reached = self.task.stage_reached(self.sim, self.episode.layout)
+            if tuple(reached) != self.task.stages:
+                raise ValueError(f"{type(self.task).__name__}.stage_reached returned stages {tuple(reached)}; "
+                                 f"it must return exactly its declared `stages` {self.task.stages}, in order")
+            for stage, now in reached.items():
+                self._stages[stage] = self._stages[stage] or bool(now)
+        return dict(self._stages)
+
     def _info(self, clipped: bool, contacts: list, clearance: float, limited: bool = False) -> dict:
         layout = self.episode.layout
+        stages = self._latch_stages()
         return {
             "success": self._success,
             "is_success": self._success,
@@ -371,6 +387,8 @@ class TabletopEnv(gym.Env):
             "instruction": self.task.instruction_text(layout),
             "target_phrases": self.task.target_phrases(layout),
             "slot_objects": {slot: layout.names.get(slot, slot) for slot in self.task.object_slots},
+            "stages": stages,
+            "stage": furthest_stage(stages),
         }
 
     # ---- experts and rendering ------------------------------------------------------------

@@ -28,6 +28,10 @@ and implements
         The expert's EE waypoints, used to keep distractors off the path.
     obstacle_region(layout) -> (M, 3)  [default: the path's transport part]
         Polyline near which "obstacle" cylinders are placed.
+    stages, stage_reached(sim, layout) -> dict[str, bool]   [default: ("success",)]
+        The ordered milestones of the task (reached the handle, grasped, lifted, ...) and which
+        of them the current state shows, so a failed episode says how far it got. Each is a
+        geometric check with its threshold in metres; the last one is `is_success`.
 
 `plan_expert` gets `sim=None` when only the path is needed (before the scene exists), so
 plan from the layout and use `sim` only for refinements. The registry is in
@@ -86,6 +90,33 @@ class Layout:
             self.names[slot] = f"{placement.color}_{placement.kind}" if variation.has("similar") else slot
 
 
+# Stage thresholds shared by the tasks. 3 cm is about a finger's length: closer than that the
+# expert's grasp and push points are reached, while the approach pose above them (8-10 cm) is not.
+REACH_TOLERANCE = 0.03  # m, TCP to the part that is grasped or pushed
+LIFT_HEIGHT = 0.03  # m, a held object's bottom above the table (or where it rested)
+TILT_COS = 0.5  # a held container's axis more than 60 degrees from vertical: pouring has begun
+
+
+def segment_distance(point: np.ndarray, start: np.ndarray, end: np.ndarray) -> float:
+    """Distance (m) from `point` (3,) to the segment start -> end (each (3,))."""
+    along = end - start
+    t = float(np.clip(np.dot(point - start, along) / max(float(np.dot(along, along)), 1e-12), 0.0, 1.0))
+    return float(np.linalg.norm(point - (start + t * along)))
+
+
+def rim_distance(sim: SimState, name: str, radius: float, height: float) -> float:
+    """Distance (m) from the TCP to the rim (a circle of `radius` at `height`, m) of the open container
+    `name`, whose body origin is the centre of its bottom."""
+    local = sim.body_rotation(name).T @ (sim.ee_pose()[0] - sim.body_position(name))
+    return float(np.hypot(np.hypot(local[0], local[1]) - radius, local[2] - height))
+
+
+def furthest_stage(stages: dict[str, bool]) -> str | None:
+    """The last stage, in task order, that was reached (None if none was)."""
+    reached = [stage for stage, flag in stages.items() if flag]
+    return reached[-1] if reached else None
+
+
 class SimState:
     """Read access to a running scene for success checks and experts."""
 
@@ -111,6 +142,21 @@ class SimState:
     def joint_qpos(self, name: str) -> float:
         return float(self.data.qpos[self.model.joint(name).qposadr[0]])
 
+    def site_position(self, name: str) -> np.ndarray:
+        return self.data.site_xpos[self.model.site(name).id].copy()
+
+    def tcp_distance(self, point: np.ndarray) -> float:
+        """Distance (m) from the EE's tool centre point to a world point (3,)."""
+        return float(np.linalg.norm(self.ee_pose()[0] - np.asarray(point, float)))
+
+    def holds(self, name: str) -> bool:
+        """Whether the fingers hold body `name` or a body of scene object `name`."""
+        body = self.gripper.held_body(self.data)
+        if body < 0:
+            return False
+        body_name = self.model.body(body).name
+        return name in (body_name, object_of_body(body_name))
+
     def held_object(self) -> str | None:
         """Name of the object held between the fingers, or None."""
         body = self.gripper.held_body(self.data)
@@ -135,6 +181,7 @@ class Task(ABC):
     instruction: ClassVar[str]
     max_steps: ClassVar[int] = 200
     similar_slots: ClassVar[tuple[str, ...]] = ()
+    stages: ClassVar[tuple[str, ...]] = ("success",)
 
     @abstractmethod
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout: ...
@@ -150,6 +197,15 @@ class Task(ABC):
 
     def nominal_path(self, layout: Layout) -> np.ndarray:
         return self.plan_expert(None, layout).path()
+
+    def stage_reached(self, sim: SimState, layout: Layout) -> dict[str, bool]:
+        """Which of `stages` the current state shows; memoryless (`TabletopEnv` latches them).
+
+        Returns:
+            stage -> bool with exactly the keys of `stages`, in order; the last one is `is_success`.
+            The default (a task that declares no stages) reports success only.
+        """
+        return {"success": bool(self.is_success(sim, layout))}
 
     def obstacle_region(self, layout: Layout) -> np.ndarray:
         """Default: the path's waypoints above 8 cm (the transport phase), else the whole path."""

@@ -15,6 +15,10 @@ until the bottom is 5 mm above the drawer floor, release, retreat upwards.
 
 Success: the bottle is released, upright (tilt under ~25 degrees), its centre inside the drawer's
 inner floor rectangle, its bottom within 2 cm of the floor and nearly at rest (< 5 cm/s).
+
+Stages: reached_bottle (TCP within 3 cm of the bottle's axis, bottom to cap), grasped (the bottle
+held), lifted (held, its bottom 3 cm above the table), carried_to_drawer (its centre over the
+drawer's inner floor, at any height), placed (success).
 """
 
 from __future__ import annotations
@@ -26,7 +30,15 @@ from lano3dp.sim.objects import primitives
 from lano3dp.sim.objects.primitives import BOTTLE_BODY_HALF
 from lano3dp.sim.robot import HOME_POSITION, top_down
 from lano3dp.sim.tasks import register_task
-from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.tasks.base import (
+    LIFT_HEIGHT,
+    REACH_TOLERANCE,
+    Layout,
+    Placement,
+    SimState,
+    Task,
+    segment_distance,
+)
 from lano3dp.sim.tasks.open_drawer import build_drawer, close_gently, drawer_frame, sample_beside, sample_drawer
 from lano3dp.sim.variations import Variation
 
@@ -71,6 +83,7 @@ class BottleInDrawer(Task):
     instruction = "put the {bottle} into the {drawer}"
     max_steps = 150
     similar_slots = ("bottle",)
+    stages = ("reached_bottle", "grasped", "lifted", "carried_to_drawer", "placed")
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)
@@ -136,3 +149,16 @@ class BottleInDrawer(Task):
             return False
         half = BOTTLE_BODY_HALF * layout.objects["bottle"].scale
         return in_drawer(sim, layout, sim.body_position(name), bottom_offset=half)
+
+    def stage_reached(self, sim: SimState, layout: Layout) -> dict[str, bool]:
+        name, scale = layout.names["bottle"], layout.objects["bottle"].scale
+        centre, axis = sim.body_position(name), sim.body_rotation(name)[:, 2]
+        half = BOTTLE_BODY_HALF * scale
+        held = sim.holds(name)
+        tcp = sim.ee_pose()[0]
+        near = segment_distance(tcp, centre - half * axis, centre + BOTTLE_TOP_ABOVE_CENTRE * scale * axis)
+        return {"reached_bottle": near < REACH_TOLERANCE,
+                "grasped": held,
+                "lifted": held and centre[2] - half >= LIFT_HEIGHT,
+                "carried_to_drawer": in_drawer(sim, layout, centre, bottom_offset=half, floor_tolerance=np.inf),
+                "placed": self.is_success(sim, layout)}

@@ -11,6 +11,10 @@ rotate 90 degrees about the finger axis so the neck points up, lower until the b
 
 Success: the bottle axis is within 15 degrees of vertical with the neck up, it stands on the
 table (centre at its half height +- 1.5 cm), is not held, and moves slower than 5 cm/s.
+
+Stages: reached_bottle (TCP within 3 cm of the bottle's axis, bottom to cap), grasped (the bottle
+held), lifted (held, its centre 3 cm above where it lay), upright (its axis within 15 degrees of
+vertical, neck up, held or not), standing (success).
 """
 
 from __future__ import annotations
@@ -22,7 +26,16 @@ from lano3dp.sim.objects import primitives
 from lano3dp.sim.objects.primitives import BOTTLE_BODY_HALF, BOTTLE_RADIUS
 from lano3dp.sim.robot import HOME_POSITION, rot_axis, rot_z, top_down
 from lano3dp.sim.tasks import register_task
-from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.tasks.base import (
+    LIFT_HEIGHT,
+    REACH_TOLERANCE,
+    Layout,
+    Placement,
+    SimState,
+    Task,
+    segment_distance,
+)
+from lano3dp.sim.tasks.bottle_in_drawer import BOTTLE_TOP_ABOVE_CENTRE
 from lano3dp.sim.variations import Variation
 
 COM_OFFSET = 0.012  # centre of mass above the body centre along the bottle axis, metres at scale 1
@@ -47,6 +60,7 @@ class BottleUpright(Task):
     instruction = "stand the {bottle} upright"
     max_steps = 150
     similar_slots = ("bottle",)
+    stages = ("reached_bottle", "grasped", "lifted", "upright", "standing")
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)
@@ -114,3 +128,16 @@ class BottleUpright(Task):
             and sim.held_object() != name
             and np.linalg.norm(sim.body_velocity(name)[3:]) < 0.05
         )
+
+    def stage_reached(self, sim: SimState, layout: Layout) -> dict[str, bool]:
+        bottle = layout.objects["bottle"]
+        name, scale = layout.names["bottle"], bottle.scale
+        centre, axis = sim.body_position(name), sim.body_rotation(name)[:, 2]
+        bottom, top = centre - BOTTLE_BODY_HALF * scale * axis, centre + BOTTLE_TOP_ABOVE_CENTRE * scale * axis
+        held = sim.holds(name)
+        lying_z = BOTTLE_RADIUS * scale * bottle.params.get("radius_scale", 1.0)  # its centre's height as laid
+        return {"reached_bottle": segment_distance(sim.ee_pose()[0], bottom, top) < REACH_TOLERANCE,
+                "grasped": held,
+                "lifted": held and centre[2] - lying_z >= LIFT_HEIGHT,
+                "upright": bool(axis[2] > UPRIGHT_COS),
+                "standing": self.is_success(sim, layout)}

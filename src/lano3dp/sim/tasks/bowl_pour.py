@@ -12,6 +12,10 @@ tangent to the grasped wall, hold, tilt back.
 
 Success: every item is inside the pan (xy within the pan's radius, at most 2 cm above its rim
 as items may stack, not rising faster than 5 cm/s) and none is still inside the bowl.
+
+Stages: reached_bowl (TCP within 3 cm of the bowl's rim), grasped (the bowl held), lifted (held, its
+bottom 3 cm above the table), over_pan (held above the pan's rim, bowl and pan overlapping seen from
+above), tilted (held with its axis more than 60 degrees from vertical), poured (success).
 """
 
 from __future__ import annotations
@@ -23,7 +27,16 @@ from lano3dp.sim.objects import primitives
 from lano3dp.sim.objects.primitives import BOWL_HEIGHT, BOWL_RADIUS, BOWL_WALLS, PAN_RADIUS, PAN_WALL_HEIGHT
 from lano3dp.sim.robot import HOME_POSITION, rot_axis, top_down
 from lano3dp.sim.tasks import register_task
-from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.tasks.base import (
+    LIFT_HEIGHT,
+    REACH_TOLERANCE,
+    TILT_COS,
+    Layout,
+    Placement,
+    SimState,
+    Task,
+    rim_distance,
+)
 from lano3dp.sim.variations import Variation
 
 CARRY_HEIGHT = 0.24
@@ -47,6 +60,7 @@ class BowlPour(Task):
     instruction = "pour the contents of the {bowl} into the {pan}"
     max_steps = 220
     similar_slots = ("bowl",)
+    stages = ("reached_bowl", "grasped", "lifted", "over_pan", "tilted", "poured")
     n_items = 3
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
@@ -160,3 +174,17 @@ class BowlPour(Task):
             if sim.body_velocity(key)[5] > 0.05:  # still bouncing up
                 return False
         return True
+
+    def stage_reached(self, sim: SimState, layout: Layout) -> dict[str, bool]:
+        bowl, pan = layout.objects["bowl"], layout.objects["pan"]
+        name = layout.names["bowl"]
+        position, axis = sim.body_position(name), sim.body_rotation(name)[:, 2]
+        held = sim.holds(name)
+        apart = np.linalg.norm(position[:2] - sim.body_position(layout.names["pan"])[:2])
+        return {"reached_bowl": rim_distance(sim, name, BOWL_RADIUS * bowl.scale, bowl_height(bowl)) < REACH_TOLERANCE,
+                "grasped": held,
+                "lifted": held and position[2] >= LIFT_HEIGHT,
+                "over_pan": held and position[2] > PAN_WALL_HEIGHT
+                and apart < (PAN_RADIUS * pan.scale + BOWL_RADIUS * bowl.scale),
+                "tilted": held and axis[2] < TILT_COS,
+                "poured": self.is_success(sim, layout)}

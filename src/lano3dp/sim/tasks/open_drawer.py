@@ -12,6 +12,9 @@ out to 95% of the travel, release and lift.
 
 Success: the drawer is out by at least 60% of its travel (8.4 cm at scale 1).
 
+Stages: reached_handle (TCP within 3 cm of the handle bar's middle), grasped_handle (that, with the
+drawer held), pulled (out 2 cm beyond where it started), opened (success).
+
 Differences from RLBench: one drawer instead of three (RLBench picks the bottom, middle or
 top one by the instruction), and a free-floating gripper instead of an arm.
 """
@@ -24,7 +27,7 @@ from lano3dp.sim.experts import CLOSED, MotionPlan
 from lano3dp.sim.objects.articulated import DrawerParts, add_drawer
 from lano3dp.sim.robot import HOME_POSITION, rot_z, top_down
 from lano3dp.sim.tasks import register_task
-from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.tasks.base import REACH_TOLERANCE, Layout, Placement, SimState, Task
 from lano3dp.sim.variations import Variation
 
 OPEN_FRACTION = 0.6  # success threshold, fraction of the drawer's travel
@@ -33,6 +36,7 @@ DRAWER_COLORS = ("white", "blue", "green", "grey")
 # drawer front by 1.4 cm and reach the bar together. Fully open (9 cm) and offset outward instead,
 # the inner finger met the bar first and rammed the drawer shut before the outer one arrived.
 PREGRASP_GRIP = 0.5
+PULLED = 0.02  # m beyond the initial opening: the drawer moved under the hand, not by a brush
 CLEARANCE_KEY = "drawer_clearance"  # layout entry that only reserves the pulled-out drawer's footprint
 
 
@@ -138,6 +142,7 @@ class OpenDrawer(Task):
     object_slots = ("drawer",)
     instruction = "open the {drawer}"
     max_steps = 100
+    stages = ("reached_handle", "grasped_handle", "pulled", "opened")
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         layout = Layout(seed=0, objects=sample_drawer(rng, variation, opening=(0.0, 0.15)))
@@ -177,3 +182,12 @@ class OpenDrawer(Task):
     def is_success(self, sim: SimState, layout: Layout) -> bool:
         parts, _, _ = drawer_frame(layout)
         return sim.joint_qpos(parts.joint) >= OPEN_FRACTION * parts.travel
+
+    def stage_reached(self, sim: SimState, layout: Layout) -> dict[str, bool]:
+        parts, _, _ = drawer_frame(layout)
+        at_handle = sim.tcp_distance(sim.site_position(parts.handle_site)) < REACH_TOLERANCE
+        pulled = sim.joint_qpos(parts.joint) - layout.objects["drawer"].params["opening"]
+        return {"reached_handle": at_handle,
+                "grasped_handle": at_handle and sim.holds(layout.names["drawer"]),
+                "pulled": pulled >= PULLED,
+                "opened": self.is_success(sim, layout)}

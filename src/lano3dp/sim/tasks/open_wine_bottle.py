@@ -11,6 +11,9 @@ Expert: top-down over the cap with the fingers part-closed, descend until the fi
 Success: the cap is at least 3 cm up the neck (it is off the bottle: it overlaps the neck by
 1 cm when on) and the bottle still stands upright.
 
+Stages: reached_cap (TCP within 3 cm of the cap's centre), grasped_cap (the cap itself held),
+pulled (the cap 1 cm up the neck), opened (success).
+
 Differences from RLBench: RLBench's cap is unscrewed (a twist of the wrist, then a lift); here
 it comes off with a straight pull, like a cork. The skill is still "grasp a small part of an
 object that must stay put and move it relative to the rest".
@@ -24,13 +27,14 @@ from lano3dp.sim.experts import MotionPlan
 from lano3dp.sim.objects.articulated import WineBottleParts, add_wine_bottle
 from lano3dp.sim.robot import HOME_POSITION, top_down
 from lano3dp.sim.tasks import register_task
-from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.tasks.base import REACH_TOLERANCE, Layout, Placement, SimState, Task
 from lano3dp.sim.tasks.open_drawer import close_gently
 from lano3dp.sim.variations import Variation
 
 OFF_HEIGHT = 0.03  # m the cap must have moved up the neck
 PULL = 0.05  # m the expert pulls
 PREGRASP_GRIP = 0.35  # ~5.8 cm between the fingers around the 3.2 cm cap
+PULLED = 0.01  # m up the neck: the cap moved, but is still on
 BOTTLE_COLORS = ("red", "blue", "brown", "purple")
 
 
@@ -41,6 +45,7 @@ class OpenWineBottle(Task):
     object_slots = ("bottle",)
     instruction = "open the {bottle}"
     max_steps = 90
+    stages = ("reached_cap", "grasped_cap", "pulled", "opened")
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)
@@ -84,3 +89,10 @@ class OpenWineBottle(Task):
         parts = WineBottleParts.of(layout.names["bottle"], layout.objects["bottle"].scale)
         upright = sim.body_rotation(parts.body)[2, 2] > 0.95
         return bool(upright and sim.joint_qpos(parts.joint) >= OFF_HEIGHT)
+
+    def stage_reached(self, sim: SimState, layout: Layout) -> dict[str, bool]:
+        parts = WineBottleParts.of(layout.names["bottle"], layout.objects["bottle"].scale)
+        return {"reached_cap": sim.tcp_distance(sim.body_position(parts.cap)) < REACH_TOLERANCE,
+                "grasped_cap": sim.holds(parts.cap),
+                "pulled": sim.joint_qpos(parts.joint) >= PULLED,
+                "opened": self.is_success(sim, layout)}

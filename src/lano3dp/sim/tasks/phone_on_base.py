@@ -15,6 +15,10 @@ Success: the phone is released, lies flat (tilt under ~18 degrees) on the recess
 bottom within 6 mm of the floor, which it can only reach inside the rim) with its centre in
 the recess, nearly at rest (< 5 cm/s).
 
+Stages: reached_phone (TCP within 3 cm of the phone's centre), grasped (the phone held), lifted
+(held, its bottom 3 cm above the table), carried_to_base (its centre over the recess, at any
+height), placed (success).
+
 Differences from RLBench: RLBench's base holds the phone upright in a slot; here the phone
 lies flat in a rimmed recess, which keeps the pick, the carry and the aligned placement
 without an in-hand reorientation.
@@ -28,7 +32,7 @@ from lano3dp.sim.experts import MotionPlan
 from lano3dp.sim.objects.articulated import PhoneBaseParts, PhoneParts, add_phone, add_phone_base
 from lano3dp.sim.robot import HOME_POSITION, rot_z, top_down
 from lano3dp.sim.tasks import register_task
-from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.tasks.base import LIFT_HEIGHT, REACH_TOLERANCE, Layout, Placement, SimState, Task
 from lano3dp.sim.tasks.close_microwave import yaw_along
 from lano3dp.sim.tasks.open_drawer import close_gently
 from lano3dp.sim.variations import Variation
@@ -50,6 +54,7 @@ class PhoneOnBase(Task):
     instruction = "put the {phone} on the {base}"
     max_steps = 130
     similar_slots = ("phone",)
+    stages = ("reached_phone", "grasped", "lifted", "carried_to_base", "placed")
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)
@@ -121,8 +126,28 @@ class PhoneOnBase(Task):
         rotation = sim.body_rotation(parts.body)
         if abs(rotation[2, 2]) < 0.95 or np.linalg.norm(sim.body_velocity(parts.body)[3:]) > 0.05:
             return False
+        inside, local = self.over_recess(sim, layout)
+        on_floor = local[2] - parts.thickness / 2 < base_parts.plate + 0.006
+        return bool(inside and on_floor)
+
+    def over_recess(self, sim: SimState, layout: Layout) -> tuple[bool, np.ndarray]:
+        """Whether the phone's centre is over the base's recess (at any height), and that centre (3,) in
+        the base's frame."""
+        phone, base = layout.objects["phone"], layout.objects["base"]
+        parts = PhoneParts.of(layout.names["phone"], phone.scale)
+        base_parts = PhoneBaseParts.of(layout.names["base"], base.scale)
         base_name = base_parts.body
         local = sim.body_rotation(base_name).T @ (sim.body_position(parts.body) - sim.body_position(base_name))
         inside = abs(local[0]) < base_parts.inner_length / 2 and abs(local[1]) < base_parts.inner_width / 2
-        on_floor = local[2] - parts.thickness / 2 < base_parts.plate + 0.006
-        return bool(inside and on_floor)
+        return bool(inside), local
+
+    def stage_reached(self, sim: SimState, layout: Layout) -> dict[str, bool]:
+        phone = layout.objects["phone"]
+        parts = PhoneParts.of(layout.names["phone"], phone.scale)
+        centre = sim.body_position(parts.body)
+        held = sim.holds(layout.names["phone"])
+        return {"reached_phone": sim.tcp_distance(centre) < REACH_TOLERANCE,
+                "grasped": held,
+                "lifted": held and centre[2] - parts.thickness / 2 >= LIFT_HEIGHT,
+                "carried_to_base": self.over_recess(sim, layout)[0],
+                "placed": self.is_success(sim, layout)}

@@ -16,6 +16,10 @@ the block is 1 cm above the floor, release, retreat.
 Success: the block is released, its centre over the drawer's inner floor, its bottom within
 2 cm of the floor, nearly at rest (< 5 cm/s).
 
+Stages: reached_block (TCP within 3 cm of the block's centre), grasped (the block held), lifted
+(held, its bottom 3 cm above the table), carried_to_drawer (its centre over the drawer's inner
+floor, at any height), placed (success).
+
 Differences from RLBench: RLBench's cabinet has three closed drawers and the robot first
 opens the named one; here the single drawer starts open (the language registry's "open
 drawer"), so the task is the pick-and-place part; `open_drawer` covers the opening.
@@ -29,7 +33,7 @@ from lano3dp.sim.experts import MotionPlan
 from lano3dp.sim.objects.articulated import BLOCK_HALF, add_block
 from lano3dp.sim.robot import HOME_POSITION, rot_z, top_down
 from lano3dp.sim.tasks import register_task
-from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.tasks.base import LIFT_HEIGHT, REACH_TOLERANCE, Layout, Placement, SimState, Task
 from lano3dp.sim.tasks.bottle_in_drawer import CARRY_CLEARANCE, drawer_slot_centre, in_drawer
 from lano3dp.sim.tasks.close_microwave import yaw_along
 from lano3dp.sim.tasks.open_drawer import build_drawer, close_gently, drawer_frame, sample_beside, sample_drawer
@@ -47,6 +51,7 @@ class PutItemInDrawer(Task):
     instruction = "put the {block} into the {drawer}"
     max_steps = 130
     similar_slots = ("block",)
+    stages = ("reached_block", "grasped", "lifted", "carried_to_drawer", "placed")
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)
@@ -110,3 +115,13 @@ class PutItemInDrawer(Task):
             return False
         half = BLOCK_HALF * layout.objects["block"].scale
         return in_drawer(sim, layout, sim.body_position(name), bottom_offset=half)
+
+    def stage_reached(self, sim: SimState, layout: Layout) -> dict[str, bool]:
+        name = layout.names["block"]
+        centre, half = sim.body_position(name), BLOCK_HALF * layout.objects["block"].scale
+        held = sim.holds(name)
+        return {"reached_block": sim.tcp_distance(centre) < REACH_TOLERANCE,
+                "grasped": held,
+                "lifted": held and centre[2] - half >= LIFT_HEIGHT,
+                "carried_to_drawer": in_drawer(sim, layout, centre, bottom_offset=half, floor_tolerance=np.inf),
+                "placed": self.is_success(sim, layout)}

@@ -16,6 +16,10 @@ head is 3.5 cm short of the dustpan's back wall, lift the broom (still held).
 Success: at least 3 of the 4 dirt cubes lie inside the dustpan (between its mouth and back wall,
 between its side walls, on the floor).
 
+Stages: reached_broom (TCP within 3 cm of the handle's axis), grasped (the broom held), lifted
+(held, its head 3 cm above the table), swept (3 of the 4 cubes pushed 3 cm towards the dustpan
+from where they lay), in_dustpan (success).
+
 Differences from RLBench: a push broom moved in a straight line (RLBench's broom is swept with a
 wrist motion), 4 cubes instead of 5 small dirt particles, and a lip-less dustpan floor.
 """
@@ -29,7 +33,15 @@ from lano3dp.sim.objects import primitives
 from lano3dp.sim.objects.articulated import BroomParts, DustpanParts, add_broom, add_dustpan
 from lano3dp.sim.robot import HOME_POSITION, rot_z, top_down
 from lano3dp.sim.tasks import register_task
-from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.tasks.base import (
+    LIFT_HEIGHT,
+    REACH_TOLERANCE,
+    Layout,
+    Placement,
+    SimState,
+    Task,
+    segment_distance,
+)
 from lano3dp.sim.tasks.close_microwave import yaw_along
 from lano3dp.sim.tasks.open_drawer import close_gently
 from lano3dp.sim.variations import Variation
@@ -40,6 +52,7 @@ DIRT_OFFSET = 0.10  # cluster centre in front of the mouth, m
 GRASP_TCP_HEIGHT = 0.002 + 0.01  # fingertips 2 mm above the table (1 cm below the TCP)
 HEAD_CLEARANCE = 0.002  # broom head above the table while sweeping
 LIFT = 0.06
+SWEPT = 0.03  # m a dirt cube moved along the sweep direction for the "swept" stage
 BROOM_COLORS = ("red", "blue", "green", "purple")
 DUSTPAN_COLORS = ("black", "yellow", "grey", "orange")
 
@@ -58,6 +71,7 @@ class SweepToDustpan(Task):
     instruction = "sweep the dirt into the {dustpan} with the {broom}"
     max_steps = 150
     similar_slots = ("broom",)
+    stages = ("reached_broom", "grasped", "lifted", "swept", "in_dustpan")
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         instance = variation.has("instance")
@@ -182,3 +196,20 @@ class SweepToDustpan(Task):
             swept += bool(0.0 < local[0] < parts.depth and abs(local[1]) < parts.inner_half_width
                           and local[2] < parts.wall_height)
         return swept >= MIN_SWEPT
+
+    def stage_reached(self, sim: SimState, layout: Layout) -> dict[str, bool]:
+        broom = layout.objects["broom"]
+        parts = BroomParts.of(layout.names["broom"], broom.scale)
+        origin, rotation = sim.body_position(parts.body), sim.body_rotation(parts.body)
+        hx, _, hz = parts.head_half
+        handle = [origin + rotation @ np.array([x, 0.0, 0.0]) for x in (-hx, -hx - parts.handle_length)]
+        held = sim.holds(layout.names["broom"])
+        angle = layout.params["sweep_angle"]
+        v = np.array([np.cos(angle), np.sin(angle)])
+        pushed = sum(float((sim.body_position(key)[:2] - dirt.position[:2]) @ v) >= SWEPT
+                     for key, dirt in layout.objects.items() if dirt.kind == "item")
+        return {"reached_broom": segment_distance(sim.ee_pose()[0], *handle) < REACH_TOLERANCE,
+                "grasped": held,
+                "lifted": held and origin[2] - hz >= LIFT_HEIGHT,
+                "swept": pushed >= MIN_SWEPT,
+                "in_dustpan": self.is_success(sim, layout)}

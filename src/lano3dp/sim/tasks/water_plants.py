@@ -15,6 +15,10 @@ at about 100 degrees), hold, tilt back.
 Success: at least 3 of the 4 water spheres rest in the pot (xy within its radius, below its rim
 plus 2 cm, out of the can, slower than 5 cm/s).
 
+Stages: reached_can (TCP within 3 cm of the can's rim), grasped (the can held), lifted (held, its
+bottom 3 cm above the table), over_plant (held above the pot's rim, can and pot overlapping seen
+from above), tilted (held with its axis more than 60 degrees from vertical), watered (success).
+
 Differences from RLBench: water is 4 rigid spheres instead of particles, it leaves over the rim
 on the spout's side (the spout is visual only), and the can is held by its back wall rather than
 by a handle.
@@ -37,7 +41,16 @@ from lano3dp.sim.objects.articulated import (
 )
 from lano3dp.sim.robot import HOME_POSITION, rot_axis, top_down
 from lano3dp.sim.tasks import register_task
-from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
+from lano3dp.sim.tasks.base import (
+    LIFT_HEIGHT,
+    REACH_TOLERANCE,
+    TILT_COS,
+    Layout,
+    Placement,
+    SimState,
+    Task,
+    rim_distance,
+)
 from lano3dp.sim.tasks.open_drawer import close_gently
 from lano3dp.sim.variations import Variation
 
@@ -60,6 +73,7 @@ class WaterPlants(Task):
     instruction = "water the {plant} with the {watering can}"
     max_steps = 150
     similar_slots = ("watering can",)
+    stages = ("reached_can", "grasped", "lifted", "over_plant", "tilted", "watered")
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         instance = variation.has("instance")
@@ -160,4 +174,19 @@ class WaterPlants(Task):
             resting = np.linalg.norm(sim.body_velocity(key)[3:]) < 0.05
             watered += bool(in_pot and not in_can and resting)
         return watered >= MIN_WATERED
+
+    def stage_reached(self, sim: SimState, layout: Layout) -> dict[str, bool]:
+        can, pot = layout.objects["watering can"], layout.objects["plant"]
+        name = layout.names["watering can"]
+        position, axis = sim.body_position(name), sim.body_rotation(name)[:, 2]
+        held = sim.holds(name)
+        apart = np.linalg.norm(position[:2] - sim.body_position(layout.names["plant"])[:2])
+        rim = rim_distance(sim, name, CAN_RADIUS * can.scale, CAN_HEIGHT * can.scale)
+        return {"reached_can": rim < REACH_TOLERANCE,
+                "grasped": held,
+                "lifted": held and position[2] >= LIFT_HEIGHT,
+                "over_plant": held and position[2] > POT_HEIGHT * pot.scale
+                and apart < (POT_RADIUS * pot.scale + CAN_RADIUS * can.scale),
+                "tilted": held and axis[2] < TILT_COS,
+                "watered": self.is_success(sim, layout)}
 

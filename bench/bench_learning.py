@@ -65,6 +65,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--work", type=Path, default=ROOT / "bench" / "out" / "learning")
     parser.add_argument("--tag", default="", help="suffix of the results files")
     parser.add_argument("--report-only", action="store_true", help="tabulate what --work holds; run nothing")
+    parser.add_argument("--package", action="store_true",
+                        help="export each task's final checkpoint of the first recipe and seed as the policy the "
+                             "package ships (src/lano3dp/checkpoints/<task>, fp16), with its record")
     return parser.parse_args(argv)
 
 
@@ -107,7 +110,7 @@ def collect_report(args, tasks, recipes, seeds) -> dict:
                     curve.append({"step": step, "cpu_minutes": round(progress["cpu_s"] / 60, 2),
                                   "episodes": summary["episodes"], "successes": successes,
                                   "success_rate": summary["success_rate"], "ci95": [low, high],
-                                  "stages": summary.get("stages")})
+                                  "stages": summary.get("stage_rates")})
                 if not curve:
                     continue
                 train_config = json.loads((run / "train_config.json").read_text())
@@ -150,6 +153,29 @@ def plot(path: Path, report: dict) -> None:
     plt.close(figure)
 
 
+def package(args, cell: dict, report: dict) -> Path:
+    """Ship the cell's final checkpoint as the package's policy for its task, with the numbers it earned."""
+    from lano3dp.data.store import EpisodeStore
+    from lano3dp.policy.pretrained import PACKAGED_ROOT, export_fp16
+    from lano3dp.train import OBSERVATION_ATTRS
+
+    run = args.work / "runs" / f"{cell['task']}_{cell['recipe']}_seed{cell['seed']}"
+    final = dict(list_checkpoints(run / "checkpoints"))[cell["final"]["step"]]
+    config_path = final / "config.json"
+    config = json.loads(config_path.read_text())
+    if "observation" not in config["extra"]:  # trained before checkpoints carried it: take it from the dataset
+        attrs = EpisodeStore.open(json.loads((run / "train_config.json").read_text())["data"]).attrs
+        config["extra"]["observation"] = {key: attrs[key] for key in OBSERVATION_ATTRS if key in attrs}
+        config_path.write_text(json.dumps(config, indent=2, sort_keys=True) + "\n")
+    record = {"task": cell["task"], "recipe": cell["recipe"], "training_seed": cell["seed"], "demos": args.demos,
+              "steps": cell["final"]["step"], "cpu_minutes": cell["final"]["cpu_minutes"],
+              "success_rate": cell["final"]["success_rate"], "successes": cell["final"]["successes"],
+              "episodes": cell["final"]["episodes"], "ci95": cell["final"]["ci95"],
+              "evaluation": "clean scenes, seeds 1000000 + i, under the simulator's motion limits",
+              "stages": cell["final"].get("stages"), "made_by": report["command"], "when_utc": report["when_utc"]}
+    return export_fp16(final, PACKAGED_ROOT / cell["task"], record=record)
+
+
 def main(argv=None) -> None:
     args = parse_args(argv)
     tasks = [t for t in args.tasks.split(",") if t]
@@ -184,6 +210,11 @@ def main(argv=None) -> None:
     out = ROOT / "results" / f"learning{args.tag}.json"
     write_json(out, report)
     plot(out.with_suffix(".png"), report)
+    if args.package:
+        for cell in report["cells"]:
+            if cell["recipe"] == recipes[0] and cell["seed"] == seeds[0]:
+                folder = package(args, cell, report)
+                log(f"packaged {cell['task']}: {folder.relative_to(ROOT)}")
     for cell in report["cells"]:
         final = cell["final"]
         print(f"{cell['task']:<20} {cell['recipe']:<9} seed {cell['seed']}: {final['success_rate']:.0%} "

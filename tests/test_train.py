@@ -148,6 +148,16 @@ def test_bf16_autocast_trains(reach_data, tmp_path):
     assert load_training_state(final).step == 2
 
 
+def test_augmented_training_trains_and_records_the_augmentation(reach_data, tmp_path):
+    from lano3dp.augment import AugmentConfig
+
+    final = train(micro_config(reach_data, tmp_path / "run", augment=AugmentConfig(), steps=2, ckpt_every=2,
+                               val_ratio=0.0))
+    assert load_training_state(final).step == 2
+    saved = json.loads((final / "train_config.json").read_text())
+    assert saved["augment"]["shift"] == AugmentConfig().shift
+
+
 def test_resuming_with_another_policy_configuration_is_refused(reach_data, tmp_path):
     train(micro_config(reach_data, tmp_path / "run", steps=1, val_ratio=0.0))
     other = micro_config(reach_data, tmp_path / "run", steps=2)

@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from lano3dp.errors import Lano3dpError
+
 DEFAULT_EVAL_SEED = 1_000_000
 # Guidance defaults: A_0|k cost on every DDIM step (S = 100 training steps covers all 10), isotropic metric push
 # of 4 cm per guided step on the densified path: in results/bench_guidance.json (issue 3's sweep) DDIM-10 with
@@ -108,6 +110,10 @@ class EvalConfig:
             raise ValueError(f"guidance must be 'none', 'noisy' or 'clean', got {self.guidance!r}")
 
 
+class PolicyTaskMismatchError(Lano3dpError, ValueError):
+    """A checkpoint asked to act on a task of another skill."""
+
+
 @dataclass(frozen=True)
 class DatasetSettings:
     """What evaluation copies from the training data: where the camera looked and how clouds were made."""
@@ -121,26 +127,39 @@ class DatasetSettings:
 
 
 def dataset_settings(checkpoint: str | Path) -> DatasetSettings:
-    """Read the training dataset's attributes through the checkpoint's train_config.json (if any)."""
+    """How the checkpoint's observations were made: from its own config (extra["observation"], written since
+    checkpoints became self-contained), else from the training dataset named in its train_config.json."""
     from lano3dp.data.store import EpisodeStore
-    from lano3dp.policy.modeling import resolve_checkpoint
+    from lano3dp.policy.modeling import load_config, resolve_checkpoint
 
     folder = resolve_checkpoint(checkpoint)
+    extra = load_config(folder / "config.json").extra
     candidates = [folder / "train_config.json", folder.parent.parent / "train_config.json",
                   Path(checkpoint) / "train_config.json"]
-    for path in candidates:
-        if not path.exists():
-            continue
-        data = json.loads(path.read_text()).get("data")
-        if not data or not Path(data).exists():
-            break
+    data = next((json.loads(path.read_text()).get("data") for path in candidates if path.exists()), None)
+    attrs = extra.get("observation")
+    if attrs is None and data and Path(data).exists():
         attrs = EpisodeStore.open(data).attrs
-        camera = attrs.get("camera") or {}
-        low, high = attrs.get("crop_low"), attrs.get("crop_high")
-        return DatasetSettings(task=attrs.get("task"), image_size=attrs.get("image_size") or camera.get("height"),
-                               n_points=attrs.get("n_points"), crop_low=None if low is None else tuple(low),
-                               crop_high=None if high is None else tuple(high), data=str(data))
-    return DatasetSettings()
+    if attrs is None:
+        return DatasetSettings(task=extra.get("task"))
+    low, high = attrs.get("crop_low"), attrs.get("crop_high")
+    return DatasetSettings(task=extra.get("task") or attrs.get("task"),
+                           image_size=attrs.get("image_size") or (attrs.get("camera") or {}).get("height"),
+                           n_points=attrs.get("n_points"), crop_low=None if low is None else tuple(low),
+                           crop_high=None if high is None else tuple(high), data=str(data) if data else None)
+
+
+def check_task_matches_policy(task: str, policy_config) -> None:
+    """Refuse to run a policy on a task of another skill (its object slots would get the wrong clouds)."""
+    from lano3dp.sim.tasks import make_task
+
+    trained_skill = policy_config.extra.get("skill")
+    skill = make_task(task).skill
+    if trained_skill is not None and trained_skill != skill:
+        raise PolicyTaskMismatchError(
+            f"the checkpoint was trained for skill '{trained_skill}' (task {policy_config.extra.get('task')!r}), "
+            f"not '{skill}' (task {task!r}); pass a checkpoint of '{skill}' or --task "
+            f"{policy_config.extra.get('task') or trained_skill}")
 
 
 def guidance_config(config: EvalConfig):
@@ -180,6 +199,7 @@ class EpisodeRunner:
         task = config.task or settings.task or self.policy.config.extra.get("task")
         if task is None:
             raise ValueError("no task given and the checkpoint does not say which task it was trained on; pass --task")
+        check_task_matches_policy(task, self.policy.config)
         self.task = task
         image_size = config.image_size or settings.image_size or 128
         needs_rgb = self.policy.config.obs_type == "image" or bool(config.video_dir)
@@ -478,6 +498,7 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
     from lano3dp.language import OfflineDecomposer, SkillRegistry, UnknownObjectError, default_registry
     from lano3dp.perception import ObjectObserver, SimOracleSegmenter
     from lano3dp.policy import DiffusionPolicy
+    from lano3dp.policy.pretrained import packaged_checkpoint, packaged_checkpoints
     from lano3dp.report import plot_top_view
     from lano3dp.runtime import PolicyRunner, rollout
     from lano3dp.sim import TabletopEnv
@@ -490,10 +511,15 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
     log(f"plan: {plan.summary()}")
     checkpoint = config.checkpoint or (registry.get(plan.skill).checkpoint if plan.skill in registry else None)
     if checkpoint is None:
-        raise ValueError(f"no checkpoint for skill '{plan.skill}': pass --checkpoint, or a --registry naming one")
+        if plan.skill not in packaged_checkpoints():
+            raise ValueError(f"no checkpoint for skill '{plan.skill}' (none is packaged for it): pass --checkpoint, "
+                             "or a --registry naming one")
+        checkpoint = packaged_checkpoint(plan.skill)
+        log(f"policy: the one packaged for {plan.skill} ({checkpoint.name})")
     policy = DiffusionPolicy.from_pretrained(checkpoint)
     settings = dataset_settings(checkpoint)
     task = config.task or plan.skill
+    check_task_matches_policy(task, policy.config)
     variation = config.variation or ("obstacle" if plan.obstacles else "clean")
     env = TabletopEnv(task, variation=variation, image_size=settings.image_size or 128, render_rgb=True,
                       max_steps=config.max_steps)

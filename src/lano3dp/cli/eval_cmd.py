@@ -15,9 +15,10 @@ def register(app: typer.Typer) -> None:
 
 def eval_command(
     ctx: typer.Context,
-    checkpoint: Path = typer.Option(..., "--checkpoint", "-c",
-                                    help="Policy folder or training run (its last checkpoint)."),
-    task: str = typer.Option(None, help="Task name (default: the task of the checkpoint's dataset)."),
+    checkpoint: Path = typer.Option(None, "--checkpoint", "-c",
+                                    help="Policy folder or training run (its last checkpoint); default: the policy "
+                                         "packaged for --task."),
+    task: str = typer.Option(None, help="Task name (default: the task the checkpoint was trained on)."),
     variation: str = typer.Option("clean", help="clean, or axes joined by '+': clutter, similar, instance, camera, "
                                                 "background, obstacle."),
     episodes: int = typer.Option(20, min=1, help="Number of episodes (seeds seed, seed+1, ...)."),
@@ -48,8 +49,20 @@ def eval_command(
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+    from lano3dp.errors import Lano3dpError
     from lano3dp.evaluate import EvalConfig, evaluate
+    from lano3dp.policy.pretrained import packaged_checkpoint
 
+    console = Console(stderr=True)
+    if checkpoint is None:
+        if task is None:
+            console.print("[red]error:[/red] give --checkpoint, or --task to evaluate the policy packaged for it")
+            raise typer.Exit(1)
+        try:
+            checkpoint = packaged_checkpoint(task)
+        except Lano3dpError as error:
+            console.print(f"[red]error:[/red] {error}")
+            raise typer.Exit(1) from error
     config = EvalConfig(
         checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
         obstacles=list(obstacles) if obstacles else None, guidance=guidance, rho=rho, last_steps=last_steps,
@@ -57,7 +70,6 @@ def eval_command(
         checked=checked, margin=margin,
         held_radius=held_radius, max_steps=max_steps, workers=workers,
         video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out))
-    console = Console(stderr=True)
     console.print(f"[bold]eval[/bold] {checkpoint} on {task or '(dataset task)'} / {variation}: {episodes} episodes, "
                   f"guidance {guidance}" + (f" rho={rho} S={last_steps}" if guidance != "none" else "")
                   + f", {workers} worker(s)")
@@ -72,7 +84,12 @@ def eval_command(
             collisions += bool(record["collided"])
             bar.update(handle, completed=done, status=f"success {successes}/{done}  collided {collisions}/{done}")
 
-        result = evaluate(config, progress=progress, command=command_line(ctx))
+        try:
+            result = evaluate(config, progress=progress, command=command_line(ctx))
+        except (Lano3dpError, FileNotFoundError) as error:
+            bar.stop()
+            console.print(f"[red]error:[/red] {error}")
+            raise typer.Exit(1) from error
     console.print(summary_line(result["summary"]))
     summary = result["summary"]
     if summary.get("stage_rates"):

@@ -16,7 +16,8 @@ def register(app: typer.Typer) -> None:
 def run_command(
     ctx: typer.Context,
     instruction: str = typer.Argument(..., help='e.g. "pour the bowl into the pan and keep clear of the obstacle"'),
-    checkpoint: Path = typer.Option(None, "--checkpoint", "-c", help="Policy to run (default: from --registry)."),
+    checkpoint: Path = typer.Option(None, "--checkpoint", "-c", help="Policy to run (default: from --registry, "
+                                                                     "else the one packaged for the skill)."),
     registry: Path = typer.Option(None, help="Skill registry JSON naming a checkpoint per skill."),
     task: str = typer.Option(None, help="Simulator task (default: the plan's skill)."),
     variation: str = typer.Option(None, help="Scene variation (default: obstacle if the plan names obstacles)."),

@@ -61,11 +61,16 @@ def train_command(
     num_workers: int = typer.Option(0, "--num-workers", help="DataLoader worker processes."),
     bf16: bool = typer.Option(False, "--bf16", help="bfloat16 autocast (CPU with AMX: about 19% faster, small)."),
     ema: bool = typer.Option(True, "--ema/--no-ema", help="Save the EMA of the weights as the policy."),
+    augment: bool = typer.Option(False, "--augment/--no-augment",
+                                 help="Move each window's scene, hand and actions by one small planar rigid motion "
+                                      "(2 cm, 5 deg), jitter and drop cloud points (lano3dp.augment; not yet "
+                                      "ablated, so off by default)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
 ) -> None:
     """Train an object-centric diffusion policy (or a DP3 / DP baseline); resumes a killed run."""
     import os
 
+    from lano3dp.augment import AugmentConfig
     from lano3dp.errors import Lano3dpError
     from lano3dp.policy import down_dims_for
     from lano3dp.train import TrainConfig, policy_config_for_dataset, train
@@ -79,7 +84,8 @@ def train_command(
         config = TrainConfig(data=str(data), out=str(out), policy=policy, steps=steps, batch_size=batch_size, lr=lr,
                              warmup_steps=warmup_steps, val_ratio=val_ratio, val_every=val_every,
                              ckpt_every=ckpt_every, seed=seed, device=device, threads=threads, cpu_minutes=minutes,
-                             num_workers=num_workers, bf16=bf16, ema=ema, progress=progress)
+                             num_workers=num_workers, bf16=bf16, ema=ema, progress=progress,
+                             augment=AugmentConfig() if augment else None)
         final = train(config)
     except (Lano3dpError, ValueError, FileNotFoundError) as error:
         if isinstance(error, typer.BadParameter):

@@ -114,7 +114,7 @@ def test_valid_reply_is_parsed_and_the_request_is_structured(fake_llm):
     assert fake_llm.headers[0]["authorization"] == "Bearer secret"
     response_format = request["response_format"]
     assert response_format["type"] == "json_schema" and response_format["json_schema"]["strict"] is True
-    assert "bowl_pour" in response_format["json_schema"]["schema"]["properties"]["skill"]["enum"]
+    assert "bowl_pour" in response_format["json_schema"]["schema"]["properties"]["skill"]["anyOf"][0]["enum"]
     system, user = request["messages"]
     assert "bowl_pour: grasp the bowl and pour its contents into the pan. targets: bowl, pan" in system["content"]
     assert user["content"] == f"Instruction: {INSTRUCTION}"

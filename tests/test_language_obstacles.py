@@ -1,0 +1,201 @@
+"""Issue 16: the offline parser never drops or mistakes an obstacle, and says so when it is unsure.
+
+Each construction is one row: the instruction, and the exact plan (skill, target phrases, obstacle
+phrases) or refusal or warning it must give.
+"""
+
+import pytest
+
+from lano3dp.language import InstructionNotUnderstoodError, OfflineDecomposer, UncertainObstacleError
+
+
+@pytest.fixture(scope="module")
+def decomposer():
+    return OfflineDecomposer()
+
+
+def reading(decomposer, instruction):
+    plan = decomposer.decompose(instruction)
+    return plan.skill, plan.target_phrases, plan.obstacle_phrases
+
+
+PREPOSITIONAL = [
+    ("Pour the bowl into the pan and keep clear of the kettle", ["kettle"]),
+    ("Pour the bowl into the pan; don't hit the lamp", ["lamp"]),
+    ("Pour the bowl into the pan without touching the glass", ["glass"]),
+    ("Pour the bowl into the pan, mind the vase", ["vase"]),
+    ("Pour the bowl into the pan and watch out for the toaster", ["toaster"]),
+    ("Pour the bowl into the pan, steer clear of the teapot", ["teapot"]),
+    ("Pour the bowl into the pan without bumping into the jar", ["jar"]),
+    ("Pour the bowl into the pan and stay away from the blue mug", ["blue mug"]),
+    ("Pour the bowl into the pan, try not to knock over the candle", ["candle"]),
+]
+
+
+@pytest.mark.parametrize(("instruction", "obstacles"), PREPOSITIONAL)
+def test_prepositional_obstacle_cues(decomposer, instruction, obstacles):
+    assert reading(decomposer, instruction) == ("bowl_pour", ["bowl", "pan"], obstacles)
+
+
+PREDICATES = [
+    ("Put the block in the drawer, and the lamp counts as an obstacle.", ["lamp"]),
+    ("Put the block in the drawer; the vase is an obstacle", ["vase"]),
+    ("Treat the mug as an obstacle and put the block in the drawer", ["mug"]),
+    ("Put the block in the drawer. Obstacles: the mug and the glass.", ["mug", "glass"]),
+    ("There is a kettle on the path; put the block in the drawer.", ["kettle"]),
+    ("The mug and the glass are in the way, put the block in the drawer", ["mug", "glass"]),
+    ("There's a lamp in the way. Put the block in the drawer.", ["lamp"]),
+    ("The lamp is blocking the way, put the block in the drawer", ["lamp"]),
+    ("The vase must not be touched; put the block in the drawer", ["vase"]),
+    ("Leave the mug alone and put the block in the drawer", ["mug"]),
+    ("Put the block in the drawer, with the mug and the lamp as obstacles", ["mug", "lamp"]),
+]
+
+
+@pytest.mark.parametrize(("instruction", "obstacles"), PREDICATES)
+def test_predicate_obstacle_declarations(decomposer, instruction, obstacles):
+    assert reading(decomposer, instruction) == ("put_item_in_drawer", ["block", "drawer"], obstacles)
+
+
+def test_contrastive_declarations(decomposer):
+    assert reading(decomposer, "Pour the bowl into the pan but not the mug") == ("bowl_pour", ["bowl", "pan"], ["mug"])
+    assert reading(decomposer, "Pour the bowl into the pan, but not near the lamp") == (
+        "bowl_pour", ["bowl", "pan"], ["lamp"],
+    )  # fmt: skip
+    assert reading(decomposer, "Put the small red block in the drawer, not the blue one.") == (
+        "put_item_in_drawer", ["small red block", "drawer"], ["blue block"],
+    )  # fmt: skip
+
+
+def test_lists_of_several_obstacles_across_cues_and_predicates(decomposer):
+    assert reading(decomposer, "Water the plant, keep clear of the lamp, the vase and the kettle") == (
+        "water_plants", ["watering can", "plant"], ["lamp", "vase", "kettle"],
+    )  # fmt: skip
+    assert reading(decomposer, "Avoid the glass or the red cup; the jar is in the way too. Open the drawer.") == (
+        "open_drawer", ["drawer"], ["glass", "red cup", "jar"],
+    )  # fmt: skip
+
+
+# ---- item 2: references --------------------------------------------------------------------
+
+
+def test_a_pronoun_means_the_object_named_before_never_the_target(decomposer):
+    assert reading(decomposer, "The kettle is close to the drawer; open the drawer and don't hit it") == (
+        "open_drawer", ["drawer"], ["kettle"],
+    )  # fmt: skip
+    assert reading(decomposer, "There's a vase next to the bowl. Pour the bowl into the pan and avoid it.") == (
+        "bowl_pour", ["bowl", "pan"], ["vase"],
+    )  # fmt: skip
+    assert reading(decomposer, "The jar and the lamp are close to the pan; pour the bowl into it and avoid them") == (
+        "bowl_pour", ["bowl", "pan"], ["jar", "lamp"],
+    )  # fmt: skip
+
+
+def test_the_other_one_is_the_instance_that_is_not_the_target(decomposer):
+    instruction = "There's a red bowl and a blue bowl. Pour the red bowl into the pan; avoid the other one."
+    assert reading(decomposer, instruction) == ("bowl_pour", ["red bowl", "pan"], ["blue bowl"])
+    # Nothing else named: the other instance of the target's kind, told apart at perception time.
+    assert reading(decomposer, "Pour the red bowl into the pan and avoid the other one") == (
+        "bowl_pour", ["red bowl", "pan"], ["other bowl"],
+    )  # fmt: skip
+
+
+def test_one_anaphora_takes_the_noun_said_before(decomposer):
+    instruction = "There are two bowls, a red one and a blue one. Pour the red one in the pan, avoid the blue one."
+    assert reading(decomposer, instruction) == ("bowl_pour", ["red bowl", "pan"], ["blue bowl"])
+
+
+def test_an_ambiguous_pronoun_avoids_every_candidate_and_warns(decomposer):
+    plan = decomposer.decompose("There's a mug next to the vase. Put the block in the drawer and avoid it.")
+    assert plan.obstacle_phrases == ["mug", "vase"]
+    assert plan.warnings == ["'avoid it' may mean mug or vase; avoiding all of them"]
+
+
+def test_a_pronoun_that_can_only_mean_a_target_is_no_obstacle_and_warns(decomposer):
+    plan = decomposer.decompose("Pour the bowl into the pan, don't spill it")
+    assert (plan.target_phrases, plan.obstacles) == (["bowl", "pan"], [])
+    assert plan.warnings == ["'don't spill it' can only mean a target (bowl, pan); a target is never made an obstacle"]
+
+
+def test_a_named_target_said_to_be_avoided_stays_a_target_and_warns(decomposer):
+    plan = decomposer.decompose("Put the bottle in the drawer without touching the bottle")
+    assert (plan.skill, plan.target_phrases, plan.obstacles) == ("bottle_in_drawer", ["bottle", "drawer"], [])
+    assert plan.warnings == [
+        "'bottle' is said to be avoided but is the target bottle of bottle_in_drawer; it is not made an obstacle"
+    ]
+
+
+# ---- item 3: qualifiers --------------------------------------------------------------------
+
+
+QUALIFIERS = [
+    ("Pull out the top drawer", ("open_drawer", ["top drawer"], [])),
+    ("Open the drawer at the bottom", ("open_drawer", ["bottom drawer"], [])),
+    ("Pour the bowl on the left into the pan", ("bowl_pour", ["left bowl", "pan"], [])),
+    ("Pour the small red bowl on the right into the pan", ("bowl_pour", ["right small red bowl", "pan"], [])),
+    ("Pour the nearest bowl into the pan", ("bowl_pour", ["nearest bowl", "pan"], [])),
+    ("Pour the bowl into the pan avoiding the mug closest to you", ("bowl_pour", ["bowl", "pan"], ["nearest mug"])),
+    ("Put the block on top of the drawer", ("put_item_in_drawer", ["block", "drawer"], [])),
+    ("Right the bottle", ("bottle_upright", ["bottle"], [])),
+]
+
+
+@pytest.mark.parametrize(("instruction", "plan"), QUALIFIERS)
+def test_colour_size_and_position_words_stay_in_the_phrase(decomposer, instruction, plan):
+    assert reading(decomposer, instruction) == plan
+
+
+# ---- item 4: verbs by meaning --------------------------------------------------------------
+
+
+PHRASAL = [
+    ("Pull the drawer out", "open_drawer"),
+    ("Slide the drawer open", "open_drawer"),
+    ("Tip the bowl into the pan", "bowl_pour"),
+    ("Set the bottle upright", "bottle_upright"),
+    ("Prop the bottle up", "bottle_upright"),
+    ("Hang up the phone", "phone_on_base"),
+    ("Push the microwave shut", "close_microwave"),
+    ("Put the stapler away in the drawer", "put_item_in_drawer"),
+    ("Stash the block in the drawer", "put_item_in_drawer"),
+    ("Sweep up the crumbs into the dustpan", "sweep_to_dustpan"),
+]
+
+
+@pytest.mark.parametrize(("instruction", "skill"), PHRASAL)
+def test_phrasal_verbs_and_synonyms_from_the_registry(decomposer, instruction, skill):
+    assert decomposer.decompose(instruction).skill == skill
+
+
+def test_phrasal_verbs_live_in_the_registry():
+    from lano3dp.language import default_registry
+
+    registry = default_registry()
+    assert "pull out" in registry.get("open_drawer").verbs and "hang up" in registry.get("phone_on_base").verbs
+
+
+# ---- item 5: uncertainty -------------------------------------------------------------------
+
+
+def test_a_reference_to_nothing_is_refused_not_dropped(decomposer):
+    with pytest.raises(UncertainObstacleError, match="'avoid it' refers to no object named before it"):
+        decomposer.decompose("Avoid it and open the drawer")
+    with pytest.raises(UncertainObstacleError, match="'in the way it' refers to no object|refers to no object"):
+        decomposer.decompose("It is in the way. Open the drawer.")
+    assert issubclass(UncertainObstacleError, InstructionNotUnderstoodError)
+
+
+def test_words_after_a_cue_that_name_no_object_give_a_warning(decomposer):
+    plan = decomposer.decompose("Open the drawer and keep away from the left side of the table")
+    assert (plan.skill, plan.obstacles) == ("open_drawer", [])
+    assert plan.warnings == [
+        "'away from the left side of the table' names no object the robot can see; no obstacle was added for it"
+    ]
+    plan = decomposer.decompose("Open the drawer and don't hit anything")
+    assert plan.warnings == ["'don't hit anything' names no object the robot can see; no obstacle was added for it"]
+
+
+def test_nonsense_is_still_refused(decomposer):
+    for instruction in ("Make me a sandwich and avoid the knife", "Dance around the lamp"):
+        with pytest.raises(InstructionNotUnderstoodError):
+            decomposer.decompose(instruction)

@@ -123,6 +123,14 @@ _SUBJECT_STOPS = (
 )  # fmt: skip
 
 
+def tokenize(text: str) -> list[str]:
+    """Lower-case words and punctuation; "bowl's" -> bowl 's, "there's" -> there 's (the noun stays a noun)."""
+    words = []
+    for word in _WORD.findall(text.lower().replace("’", "'")):
+        words.extend([word[:-2], "'s"] if word.endswith("'s") and len(word) > 2 else [word])
+    return words
+
+
 def lemmas(word: str) -> set[str]:
     """Candidate base forms of an inflected verb or noun ("putting" -> put, "stored" -> store)."""
     forms = {word}
@@ -259,10 +267,7 @@ class OfflineDecomposer:
         return self._ground_in_scene(plan, skill, scene_objects)
 
     def parse(self, instruction: str, scene_objects: SceneObjects | None = None) -> Parse:
-        words = []
-        for word in _WORD.findall(instruction.lower().replace("’", "'")):
-            # "bowl's" -> bowl 's, "there's" -> there 's: the noun stays a noun.
-            words.extend([word[:-2], "'s"] if word.endswith("'s") and len(word) > 2 else [word])
+        words = tokenize(instruction)
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         words = _front_positions(words)

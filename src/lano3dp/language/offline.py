@@ -50,15 +50,13 @@ DETERMINERS = frozenset(
     """the a an this that these those its my your our their his her some any another both either each
     all two three four few several""".split()
 )
-# Position words to one canonical word each; like colours they narrow which instance is meant.
+# Position words, kept as said; like colours they narrow which instance is meant ("the top drawer").
 POSITION_WORDS = {
-    "top": "top", "upper": "top", "uppermost": "top", "topmost": "top",
-    "bottom": "bottom", "lower": "bottom", "lowest": "bottom", "bottommost": "bottom",
-    "left": "left", "leftmost": "left", "right": "right", "rightmost": "right",
-    "front": "front", "frontmost": "front", "back": "back", "rear": "back", "rearmost": "back",
-    "nearest": "nearest", "closest": "nearest", "near": "nearest", "farthest": "farthest",
-    "furthest": "farthest", "far": "farthest", "centre": "centre", "center": "centre", "other": "other",
-}  # fmt: skip
+    w: w
+    for w in """top upper uppermost topmost bottom lower lowest bottommost left leftmost right rightmost front
+    frontmost back rear rearmost nearest closest farthest furthest centre center middle first second third
+    last other""".split()
+}
 _MODIFIERS = COLOURS | SIZE_WORDS.keys() | POSITION_WORDS.keys()
 # Words that end a noun phrase: prepositions, conjunctions, adverbs of place, pronouns.
 _BOUNDARY = frozenset(
@@ -390,6 +388,12 @@ class OfflineDecomposer:
                     spans.append((start, end, start, stop, " ".join(words[start:stop])))
             elif words[i] in _OBSTACLE_NOUNS and self._obstacle_predicate(words, i):
                 spans.append(self._obstacle_predicate(words, i))
+            elif words[i] == "between":
+                # "there is a mug between the bowl and the pan", "the mug sits between them": on the path
+                start, end = self._subject_before(words, i)
+                there = start >= 2 and words[start - 1] in _COPULAS and words[start - 2] == "there"
+                if start < end and (words[i - 1] in _COPULAS or there):
+                    spans.append((start, end, start, i, " ".join(words[start:i])))
             elif words[i] == "alone" and "leave" in words[max(0, i - 8) : i]:
                 leave = max(k for k in range(max(0, i - 8), i) if words[k] == "leave")
                 spans.append((leave + 1, i, leave, i + 1, " ".join(words[leave : i + 1])))
@@ -416,19 +420,26 @@ class OfflineDecomposer:
             return k, end, i, end, " ".join(words[i:end])
         return None
 
-    @staticmethod
-    def _subject_before(words: list[str], i: int, plural: bool = False) -> tuple[int, int]:
+    def _subject_before(self, words: list[str], i: int, plural: bool = False) -> tuple[int, int]:
         """The noun phrase (or list, after a plural verb) that ends before words[i], skipping a copula."""
         j = i
         while j > 0 and words[j - 1] in _COPULAS | {"also", "still", "currently", "right", "now", "just"}:
             plural |= words[j - 1] in _PLURAL_COPULAS
             j -= 1
         end = start = j
-        while start > 0 and words[start - 1] not in _SUBJECT_STOPS:
+        while start > 0 and words[start - 1] not in _SUBJECT_STOPS and not self._is_verb(words, start - 1):
             if words[start - 1] in _LIST_SEPARATORS:
-                if not plural and start - 1 > 0 and words[start - 2] not in _SUBJECT_STOPS:
-                    # "the mug and the glass in the way" without a verb: a list only after "are"
-                    plural = any(w in _PLURAL_COPULAS for w in words[max(0, start - 12) : start])
+                k = start - 1
+                while k > 0 and words[k - 1] not in _SUBJECT_STOPS and words[k - 1] not in _LIST_SEPARATORS:
+                    k -= 1
+                if any(self._is_verb(words, m) for m in range(k, start - 1)):
+                    break  # "open the drawer, the mug and the glass are in the way": a clause, not a list item
+                if not plural:
+                    # "there's a mug, a can and a ball in the way": the list follows "there is"
+                    k = start - 1
+                    while k > 0 and words[k - 1] not in _SUBJECT_STOPS:
+                        k -= 1
+                    plural = k >= 2 and words[k - 1] in _COPULAS and words[k - 2] == "there"
                 if not plural:
                     break
             start -= 1
@@ -437,6 +448,11 @@ class OfflineDecomposer:
         while start < end and words[start] in _LIST_SEPARATORS:
             start += 1
         return start, end
+
+    def _is_verb(self, words: list[str], i: int) -> bool:
+        """A lexicon verb, not a noun after a determiner ("the base")."""
+        previous = words[i - 1] if i else ","
+        return bool(lemmas(words[i]) & self._single_verbs) and previous not in DETERMINERS | _MODIFIERS
 
     def _read_declaration(self, words: list[str], start: int, end: int, cue: str, parse: Parse) -> None:
         """Obstacles (or pending references) from an obstacle declaration's noun phrase list."""
@@ -452,6 +468,8 @@ class OfflineDecomposer:
     def _read_chunk(self, chunk: list[str], index: int, cue: str, parse: Parse) -> None:
         content = tuple(w for w in chunk if w not in _POLITE or w in ("it", "one"))
         bare = tuple(w for w in content if w not in ("very", "just", "also", "either", "any"))
+        while len(bare) > 1 and bare[-1] in ("over", "off", "down", "up", "away", "around"):
+            bare = bare[:-1]  # "don't knock it over"
         if bare in _PRONOUNS:
             parse.references.append(_Reference(index, _PRONOUNS[bare], f"{cue} {' '.join(bare)}".strip()))
             return
@@ -471,24 +489,27 @@ class OfflineDecomposer:
         color = size = position = None
         nouns: list[str] = []
         previous = ""
+        vague = False  # "the thing next to the pan": a head that names no object ends the phrase too
         for word in chunk:
             after_determiner = previous in DETERMINERS or previous in _MODIFIERS
             previous = word
             # A function word straight after "the" is a noun after all ("the can").
-            if word in _BOUNDARY and not after_determiner and word not in POSITION_WORDS:
-                if nouns:
+            if word in _BOUNDARY and not after_determiner:
+                if nouns or vague:
                     break
                 continue
             if word in DETERMINERS:
                 continue
-            if word in COLOURS:
+            if word in POSITION_WORDS and not nouns and (word != "middle" or after_determiner):
+                position = POSITION_WORDS[word]
+            elif word in COLOURS:
                 color = canonical_attribute(word)
             elif word in SIZE_WORDS:
                 size = canonical_attribute(word)
-            elif word in POSITION_WORDS and not nouns:
-                position = POSITION_WORDS[word]
             elif word not in _NON_OBJECTS:
                 nouns.append(word)
+            elif word not in POSITION_WORDS:
+                vague = True
         if not nouns:
             return None
         nouns[-1] = singular(nouns[-1])
@@ -554,11 +575,15 @@ class OfflineDecomposer:
                 continue
             chunk = []
             for j in range(i + 1, len(task)):
-                if task[j] in _BOUNDARY or task[j] in _SENTENCE_END or task[j] == "," or j in verb_positions:
+                # "a can", "the can": a function word straight after an article is the noun
+                noun_after_article = j == i + 1 and word in ("a", "an", "the") and task[j] == "can"
+                if task[j] in _SENTENCE_END or task[j] == "," or j in verb_positions:
+                    break
+                if task[j] in _BOUNDARY and not noun_after_article:
                     break
                 chunk.append(j)
             if chunk and not used & set(chunk):
-                ref = self._chunk_to_ref([task[j] for j in chunk])
+                ref = self._chunk_to_ref([word, *(task[j] for j in chunk)])
                 if ref is not None:
                     name = self._matcher_noun(ref.name, vocabulary) or ref.name
                     nouns.append(
@@ -581,12 +606,13 @@ class OfflineDecomposer:
         color = size = position = None
         j = i - 1
         while j >= 0 and task[j] in _MODIFIERS:
-            if task[j] in COLOURS:
+            if task[j] in POSITION_WORDS:
+                if j and (task[j - 1] in DETERMINERS or task[j - 1] in _MODIFIERS):
+                    position = position or POSITION_WORDS[task[j]]  # "the top drawer", not "right the bottle"
+            elif task[j] in COLOURS:
                 color = color or canonical_attribute(task[j])
-            elif task[j] in SIZE_WORDS:
+            else:
                 size = size or canonical_attribute(task[j])
-            elif j and (task[j - 1] in DETERMINERS or task[j - 1] in _MODIFIERS):
-                position = position or POSITION_WORDS[task[j]]  # "the top drawer", not "right the bottle"
             j -= 1
         return color, size, position
 
@@ -783,11 +809,13 @@ def _same_thing(skill: SkillSpec, noun: _Noun, target: _Noun) -> bool:
 
 _POST_POSITIONS = {
     ("on", "the", "left"): "left", ("on", "the", "right"): "right", ("to", "the", "left"): "left",
-    ("to", "the", "right"): "right", ("at", "the", "top"): "top", ("at", "the", "bottom"): "bottom",
-    ("on", "top"): "top", ("at", "the", "back"): "back", ("at", "the", "front"): "front", ("in", "front"): "front",
-    ("in", "the", "back"): "back", ("in", "the", "front"): "front", ("on", "the", "bottom"): "bottom",
-    ("in", "the", "middle"): "centre", ("in", "the", "centre"): "centre", ("in", "the", "center"): "centre",
-    ("nearest",): "nearest", ("closest",): "nearest", ("farthest",): "farthest", ("furthest",): "farthest",
+    ("to", "the", "right"): "right", ("on", "your", "left"): "left", ("on", "your", "right"): "right",
+    ("to", "your", "left"): "left", ("to", "your", "right"): "right", ("at", "the", "top"): "top",
+    ("at", "the", "bottom"): "bottom", ("on", "top"): "top", ("at", "the", "back"): "back",
+    ("at", "the", "front"): "front", ("in", "front"): "front", ("in", "the", "back"): "back",
+    ("in", "the", "front"): "front", ("on", "the", "bottom"): "bottom", ("in", "the", "middle"): "middle",
+    ("in", "the", "centre"): "centre", ("in", "the", "center"): "center", ("nearest",): "nearest",
+    ("closest",): "closest", ("farthest",): "farthest", ("furthest",): "furthest",
 }  # fmt: skip
 
 

@@ -152,5 +152,9 @@ def test_the_registry_says_what_the_gripper_carries():
     for fixture_skill in ("open_drawer", "close_microwave", "open_wine_bottle"):
         assert registry.get(fixture_skill).carried_slot is None
     with pytest.raises(ValueError, match="at most one"):
-        SkillSpec(name="juggle", description="d", verbs=("juggle",),
-                  slots=(Slot(word="ball", carried=True), Slot(word="club", carried=True)))
+        SkillSpec(
+            name="juggle",
+            description="d",
+            verbs=("juggle",),
+            slots=(Slot(word="ball", carried=True), Slot(word="club", carried=True)),
+        )

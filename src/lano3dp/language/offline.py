@@ -506,10 +506,10 @@ class OfflineDecomposer:
                 color = canonical_attribute(word)
             elif word in SIZE_WORDS:
                 size = canonical_attribute(word)
-            elif word not in _NON_OBJECTS:
+            elif word not in _NON_OBJECTS and not vague:
                 nouns.append(word)
             elif word not in POSITION_WORDS:
-                vague = True
+                vague = True  # "anything else": nothing after a vague head is its noun
         if not nouns:
             return None
         nouns[-1] = singular(nouns[-1])
@@ -830,8 +830,8 @@ def _front_positions(words: list[str]) -> list[str]:
         if post is None or previous in _BOUNDARY or previous in DETERMINERS or previous in _MODIFIERS:
             i += 1
             continue
-        if len(post) == 2 and post == ("on", "top") and out[i + 2 : i + 3] == ["of"]:
-            i += 1  # "on top of the drawer" is a place, not the top one
+        if out[i + len(post) : i + len(post) + 1] == ["of"]:
+            i += 1  # "on top of the drawer", "in front of it": a place relative to another object
             continue
         start = i - 1
         while start > 0 and out[start - 1] not in DETERMINERS and out[start - 1] not in _BOUNDARY | _SENTENCE_END:

@@ -237,6 +237,20 @@ def test_a_plausible_but_wrong_plan_is_refused_and_the_rules_answer(llama, what,
     assert problem in llama.requests[-1]["messages"][-1]["content"]  # the model was told what was wrong
 
 
+def test_a_renamed_object_is_refused_but_a_scene_name_or_attribute_is_not(llama):
+    llama.script = [reply("put_item_in_drawer", [ref("block"), ref("drawer")])] * 2
+    with pytest.warns(LLMFallbackWarning, match="the instruction says 'stapler', the plan 'block'"):
+        assert llm(llama).decompose("Put the stapler in the drawer").target_phrases == ["stapler", "drawer"]
+    scene = {
+        "bowl": {"kind": "bowl", "color": "blue", "size": "medium"},
+        "pan": {"kind": "pan"},
+        "distractor_mug_2": {"kind": "mug", "color": "white"},
+    }
+    llama.script = [reply("bowl_pour", [ref("bowl", "blue", "medium"), ref("pan")], [ref("distractor_mug_2")])]
+    outcome = llm(llama).decompose_with_report("Pour the bowl into the pan and avoid the mug", scene)
+    assert outcome.source == "llm" and outcome.plan.obstacle_phrases == ["distractor mug 2"]
+
+
 def test_a_wrong_plan_corrected_on_retry_is_taken(llama):
     llama.script = [WRONG[0][1], RIGHT]
     outcome = llm(llama).decompose_with_report(INSTRUCTION)

@@ -15,7 +15,8 @@ from typing import NamedTuple
 from lano3dp.language.exceptions import LanguageError
 from lano3dp.language.offline import POSITION_WORDS, OfflineDecomposer, lemmas, tokenize
 from lano3dp.language.plan import ObjectRef, TaskPlan
-from lano3dp.perception.sim_oracle import canonical_attribute, singular
+from lano3dp.language.registry import SceneObjects, scene_vocabulary
+from lano3dp.perception.sim_oracle import canonical_attribute, resolve_phrase, singular
 
 
 class CrossCheck(NamedTuple):
@@ -25,16 +26,11 @@ class CrossCheck(NamedTuple):
     warnings: list[str]
 
 
-def _same(a: ObjectRef, b: ObjectRef) -> bool:
-    """Same object as far as words tell: the same head noun, no attribute that differs."""
-    head_a, head_b = singular(a.name.split()[-1]), singular(b.name.split()[-1])
-    if head_a != head_b:
-        return False
-    return all(None in (getattr(a, k), getattr(b, k)) or getattr(a, k) == getattr(b, k) for k in ("color", "size"))
-
-
-def cross_check(plan: TaskPlan, instruction: str, rules: OfflineDecomposer) -> CrossCheck:
-    """Compare a model's `plan` (before scene grounding) with what `instruction` says."""
+def cross_check(
+    plan: TaskPlan, instruction: str, rules: OfflineDecomposer, scene_objects: SceneObjects | None = None
+) -> CrossCheck:
+    """Compare a model's `plan` (before scene grounding) with what `instruction` says. With the scene, a
+    model may name an object by its scene name ("distractor_mug_2") and add attributes the scene gives it."""
     errors: list[str] = []
     warnings: list[str] = []
     said = {form for word in tokenize(instruction) for form in lemmas(word)}
@@ -47,8 +43,24 @@ def cross_check(plan: TaskPlan, instruction: str, rules: OfflineDecomposer) -> C
     expected_obstacles = reading.obstacles if reading is not None else rules.parse(instruction).obstacles
     skill = rules.registry.get(plan.skill) if plan.skill in rules.registry else None
 
+    objects = scene_vocabulary(scene_objects) if scene_objects is not None else []
+
+    def in_scene(ref: ObjectRef) -> list:
+        return [o for o in objects if o.name in resolve_phrase(ref.phrase, objects)] if objects else []
+
+    def heads(ref: ObjectRef) -> set[str]:
+        return {singular(ref.name.split()[-1])} | {o.kind[-1] for o in in_scene(ref) if o.kind}
+
+    def _same(a: ObjectRef, b: ObjectRef) -> bool:
+        """Same object as far as words (and the scene) tell: a shared head noun, no attribute that differs."""
+        if not heads(a) & heads(b):
+            return False
+        return all(None in (getattr(a, k), getattr(b, k)) or getattr(a, k) == getattr(b, k) for k in ("color", "size"))
+
     def mentioned(ref: ObjectRef) -> bool:
-        return all(w in said for w in ref.name.split())
+        if all(w in said for w in ref.name.split()):
+            return True
+        return any(o.kind and all(w in said for w in o.kind) for o in in_scene(ref))
 
     for obstacle in plan.obstacles:
         if not mentioned(obstacle):
@@ -68,11 +80,17 @@ def cross_check(plan: TaskPlan, instruction: str, rules: OfflineDecomposer) -> C
             errors.append(f"'{target.phrase}' is an obstacle in the instruction, not a task object")
         for attribute in ("color", "size", "position"):
             value = getattr(target, attribute)
-            if value is not None and value not in said and not (attribute == "position" and value == "other"):
+            if value is None or value in said or value == "other":
+                continue
+            if not any(value in o.attributes for o in in_scene(target)):  # true of the scene object: no invention
                 errors.append(f"the plan gives '{target.name}' the {attribute} '{value}', not said in the instruction")
     if reading is not None and reading.skill == plan.skill:
-        for ours, theirs in zip(reading.targets, plan.targets, strict=False):
-            if any(getattr(ours, a) and getattr(ours, a) != getattr(theirs, a) for a in ("color", "size", "position")):
+        for slot, ours, theirs in zip(skill.slots, reading.targets, plan.targets, strict=False):
+            renamed = ours.name != theirs.name and not (slot.matches(ours.name) and slot.matches(theirs.name))
+            lost = any(
+                getattr(ours, a) and getattr(ours, a) != getattr(theirs, a) for a in ("color", "size", "position")
+            )
+            if renamed or lost:
                 errors.append(f"the instruction says '{ours.phrase}', the plan '{theirs.phrase}'")
     elif reading is not None:
         warnings.append(f"the rules read '{reading.summary()}' here; the model chose '{plan.summary()}'")

@@ -223,7 +223,7 @@ class LLMDecomposer:
                     raise ValueError(f"the reply was cut off at max_tokens={self.config.max_tokens}; JSON only")
                 plan = _parse_reply(content)
                 self.registry.validate(plan)  # skill and slot order first: their messages are the clearest
-                check = cross_check(plan, instruction, self._grounder)
+                check = cross_check(plan, instruction, self._grounder, scene_objects)
                 if check.errors:
                     raise ValueError("the plan does not match the instruction: " + "; ".join(check.errors))
                 if scene_objects is not None:

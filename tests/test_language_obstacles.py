@@ -4,6 +4,8 @@ Each construction is one row: the instruction, and the exact plan (skill, target
 phrases) or refusal or warning it must give.
 """
 
+import re
+
 import pytest
 
 from lano3dp.language import InstructionNotUnderstoodError, OfflineDecomposer, UncertainObstacleError
@@ -249,3 +251,25 @@ def test_own_obstacle_table_is_read_exactly():
         if got != expected:
             failures.append((case["instruction"], got))
     assert len(cases) >= 35 and failures == []
+
+
+NONSENSE = [
+    ("Pour the plant into the pan", "'plant' has no place in bowl_pour (bowl, pan)"),
+    ("Pour the bowl into the drawer", "'drawer' has no place in bowl_pour (bowl, pan)"),
+    ("Close the microwave with the bowl", "'bowl' has no place in close_microwave (microwave)"),
+    ("Sweep the bowl into the pan", "'sweep' is not how bowl_pour is asked for"),
+    ("Pour the pan into the bowl", "it asks to move things into the bowl, but bowl_pour carries the bowl to the pan"),
+    ("Put the microwave in the drawer", "'microwave' cannot be carried by put_item_in_drawer"),
+]
+
+
+@pytest.mark.parametrize(("instruction", "reason"), NONSENSE)
+def test_a_task_object_the_skill_cannot_take_is_refused_not_swapped_for_its_slot_word(decomposer, instruction, reason):
+    with pytest.raises(InstructionNotUnderstoodError, match=re.escape(reason)):
+        decomposer.decompose(instruction)
+
+
+def test_landmarks_and_other_sentences_are_not_task_objects(decomposer):
+    assert reading(decomposer, "Open the drawer under the microwave") == ("open_drawer", ["drawer"], [])
+    assert reading(decomposer, "Pour the bowl into the pan next to the plant") == ("bowl_pour", ["bowl", "pan"], [])
+    assert reading(decomposer, "There's a bowl next to the drawer. Open the drawer.") == ("open_drawer", ["drawer"], [])

@@ -75,18 +75,22 @@ _COLLISION_VERBS = frozenset(
     """touch hit bump knock disturb topple collide crash brush graze nudge move tip spill strike smash break
     jostle upset rattle scrape scratch damage push shove bang clip snag contact run go come""".split()
 )
-_PARTICLES = frozenset("over into against with on off near to close next too by past around of the".split()) - {"the"}
+_PARTICLES = frozenset("over into against with on off near to close next too by past around of".split())
 _PRONOUNS = {
     ("it",): "it", ("that",): "it", ("this",): "it", ("that", "one"): "it", ("this", "one"): "it",
     ("them",): "them", ("those",): "them", ("these",): "them", ("they",): "them", ("both",): "them",
     ("the", "other"): "other", ("the", "other", "one"): "other", ("the", "others"): "them",
-    ("the", "other", "ones"): "them", ("other",): "other", ("one",): "it",
+    ("the", "other", "ones"): "them", ("other",): "other",
 }  # fmt: skip
 _LIST_SEPARATORS = frozenset({"and", "or", ",", "nor", "plus"})
 _CLAUSE_ENDS = frozenset({"then", "while", "but", "before", "after", "when", "so", "once", "until", "because"})
 _POLITE = frozenset("please could would can will you robot okay ok now i need want to like kindly go ahead".split())
 _COPULAS = frozenset("is are 's was were be been being sits sit stands stand lies lie".split())
-_PLURAL_COPULAS = frozenset("are were sit stand lie count act serve block obstruct".split())
+_PLURAL_COPULAS = frozenset("are were sit stand lie".split())
+# Words before a noun that make it a landmark ("the drawer under the microwave"), not a task object.
+_LOCATIVES = frozenset("next near beside behind under below beneath above by besides opposite of close".split())
+# Verbs any manipulation can be said with; a skill that owns none of the others was not asked for.
+_GENERIC_VERBS = frozenset("put place set move take get bring transfer drop rest return raise fill".split())
 
 # Obstacle cues as token patterns; "<ing>" is any -ing word, "<hit>" a collision verb, "<det>" a determiner.
 _CUES: tuple[tuple[str, ...], ...] = (
@@ -174,6 +178,8 @@ class _Noun:
     index: int = 0  # token index, to resolve "avoid it" to the object named before
     position: str | None = None
     in_task: bool = True  # said in a sentence with a lexicon verb, not in "there are two bowls."
+    landmark: bool = False  # after "next to", "under", ...: where something is, not what to act on
+    destination: bool = False  # after "into" / "onto": where the carried object goes
 
     def ref(self, name: str | None = None) -> ObjectRef:
         return ObjectRef(name=name or self.name, color=self.color, size=self.size, position=self.position)
@@ -243,6 +249,7 @@ class OfflineDecomposer:
         """
         parse = self.parse(instruction, scene_objects)
         skill = self._choose_skill(instruction, parse)
+        self._check_fit(instruction, skill, parse)
         self._resolve_references(instruction, skill, parse)
         targets = self._fill_slots(skill, parse.nouns)
         obstacles = self._drop_targets(skill, targets, parse)
@@ -285,6 +292,11 @@ class OfflineDecomposer:
         with_verb = {sentence[i] for i in verb_positions}
         for noun in parse.nouns:
             noun.in_task = not with_verb or sentence[noun.index] in with_verb
+            k = noun.index - 1
+            while k >= 0 and (task[k] in DETERMINERS or task[k] in _MODIFIERS):
+                k -= 1
+            noun.landmark = k >= 0 and task[k] in _LOCATIVES | {"to"} and (task[k] != "to" or task[k - 1] in _LOCATIVES)
+            noun.destination = k >= 0 and task[k] in ("into", "onto")
         parse.obstacles = list(dict.fromkeys(parse.obstacles))
         return parse
 
@@ -653,6 +665,41 @@ class OfflineDecomposer:
                 instruction, f"it fits '{best.name}' and '{ranked[1].name}' equally; name the objects"
             )
         return best
+
+    def _check_fit(self, instruction: str, skill: SkillSpec, parse: Parse) -> None:
+        """Refuse a reading that would silently drop or swap an object the user asked to act on: "pour the
+        plant into the pan" is not bowl_pour(bowl, pan), nor "sweep the bowl into the pan", nor "pour the pan
+        into the bowl", nor "put the microwave in the drawer"."""
+        assigned, free = self._assign(skill, parse.nouns)
+        slots = f"{skill.name} ({', '.join(skill.slot_words)})"
+        for noun in free:
+            if noun.known and noun.in_task and not noun.landmark and not self._same_object(skill, noun, assigned):
+                raise InstructionNotUnderstoodError(instruction, f"'{noun.name}' has no place in {slots}")
+        specific = [v for v in parse.verbs if v.split()[0] not in _GENERIC_VERBS]
+        if specific and not any(skill.name in self._verbs[v] for v in parse.verbs):
+            raise InstructionNotUnderstoodError(
+                instruction,
+                f"'{specific[0]}' is not how {skill.name} is asked for; known skills: {', '.join(self.registry.names)}",
+            )
+        fixtures = {
+            w
+            for s in self.registry
+            for slot in s.slots
+            if not slot.carried and not slot.accepts_any
+            for w in slot.synonyms
+        }
+        for noun, wildcard in assigned.values():
+            if wildcard and noun.name in fixtures:
+                raise InstructionNotUnderstoodError(instruction, f"'{noun.name}' cannot be carried by {skill.name}")
+        carried = skill.carried_slot
+        if carried is not None and carried in assigned and assigned[carried][0].destination:
+            others = [n for k, (n, _) in assigned.items() if k != carried]
+            if others and not any(n.destination for n in others):
+                raise InstructionNotUnderstoodError(
+                    instruction,
+                    f"it asks to move things into the {assigned[carried][0].name}, but {skill.name} carries the "
+                    f"{skill.slots[carried].word} to the {', '.join(n.name for n in others)}",
+                )
 
     def _matcher_skills(self, verb_phrase: str) -> set[str]:
         verbs = list(self._verbs)

@@ -273,3 +273,31 @@ def test_landmarks_and_other_sentences_are_not_task_objects(decomposer):
     assert reading(decomposer, "Open the drawer under the microwave") == ("open_drawer", ["drawer"], [])
     assert reading(decomposer, "Pour the bowl into the pan next to the plant") == ("bowl_pour", ["bowl", "pan"], [])
     assert reading(decomposer, "There's a bowl next to the drawer. Open the drawer.") == ("open_drawer", ["drawer"], [])
+
+
+def test_what_a_warning_is_about_is_an_obstacle(decomposer):
+    assert reading(decomposer, "Pour the bowl into the pan, careful, the can is right beside the pan.") == (
+        "bowl_pour", ["bowl", "pan"], ["can"],
+    )  # fmt: skip
+    plan = decomposer.decompose("Pour the bowl in the pan. Careful, the kettle is hot, avoid it!")
+    assert (plan.obstacle_phrases, plan.warnings) == (["kettle"], [])
+
+
+def test_a_pronoun_may_mean_an_obstacle_already_declared(decomposer):
+    plan = decomposer.decompose("The plate is sitting in the way, so go around it and put the phone on the base.")
+    assert (plan.skill, plan.obstacle_phrases, plan.warnings) == ("phone_on_base", ["plate"], [])
+
+
+def test_clauses_about_an_obstacle_add_no_objects(decomposer):
+    for instruction in (
+        "Open the drawer without hitting the mug, which is next to it.",
+        "Open the drawer. Watch out for the mug, it is right in front.",
+        "Open the drawer; the obstacle, a mug, is in the way.",
+        "Open the drawer and avoid knocking over the mug.",
+    ):
+        plan = decomposer.decompose(instruction)
+        assert (plan.obstacle_phrases, plan.warnings) == (["mug"], []), instruction
+    # "the obstacle is next to the pan" says where the simulator's obstacle is, not that the pan is one.
+    assert reading(decomposer, "Pour the bowl into the pan, the obstacle is next to the pan.") == (
+        "bowl_pour", ["bowl", "pan"], ["obstacle"],
+    )  # fmt: skip

@@ -87,6 +87,8 @@ _CLAUSE_ENDS = frozenset({"then", "while", "but", "before", "after", "when", "so
 _POLITE = frozenset("please could would can will you robot okay ok now i need want to like kindly go ahead".split())
 _COPULAS = frozenset("is are 's was were be been being sits sit stands stand lies lie".split())
 _PLURAL_COPULAS = frozenset("are were sit stand lie".split())
+_WARNINGS = frozenset("careful caution warning attention heads".split())
+_STANCE = frozenset("sitting standing lying placed located resting positioned kept".split())
 # Words before a noun that make it a landmark ("the drawer under the microwave"), not a task object.
 _LOCATIVES = frozenset("next near beside behind under below beneath above by besides opposite of close".split())
 # Verbs any manipulation can be said with; a skill that owns none of the others was not asked for.
@@ -206,6 +208,7 @@ class Parse:
     scores: dict[str, float] = field(default_factory=dict)
     references: list[_Reference] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    declared: list[tuple[int, ObjectRef]] = field(default_factory=list)  # (token index, obstacle) as declared
 
 
 class OfflineDecomposer:
@@ -358,8 +361,10 @@ class OfflineDecomposer:
             start = i + len(cue)
             if cue[-1] == "<det>":
                 start -= 1  # the determiner belongs to the noun phrase ("not the mug")
-            while start < len(words) and words[start] in _PARTICLES:
-                start += 1
+            while start < len(words) and (
+                words[start] in _PARTICLES or (words[start].endswith("ing") and _matches("<hit>", words[start]))
+            ):
+                start += 1  # "avoid knocking over the mug": the mug, not a "knocking mug"
             end = start
             while end < len(words) and not self._clause_ends(words, end):
                 end += 1
@@ -379,8 +384,11 @@ class OfflineDecomposer:
             return True
         if any(self._cue_at(words, i, c) for c in _CUES if c[-1] != "<det>"):
             return True
-        # A lexicon verb right after "and" or a comma starts the next clause ("avoid the mug and pour ...").
         previous = words[i - 1] if i else ","
+        # ", which is next to it", ", it is right in front": a new clause about the object, not more objects
+        if previous == "," and (word in ("which", "who") or words[i + 1 : i + 2] and words[i + 1] in _COPULAS):
+            return True
+        # A lexicon verb right after "and" or a comma starts the next clause ("avoid the mug and pour ...").
         return previous in ("and", ",") and bool(lemmas(word) & self._single_verbs)
 
     def _predicate_spans(self, words: list[str]) -> list[tuple[int, int, int, int, str]]:
@@ -406,6 +414,19 @@ class OfflineDecomposer:
                 there = start >= 2 and words[start - 1] in _COPULAS and words[start - 2] == "there"
                 if start < end and (words[i - 1] in _COPULAS or there):
                     spans.append((start, end, start, i, " ".join(words[start:i])))
+            elif words[i] in _WARNINGS and words[i + 1 : i + 2] and words[i + 1] in {",", ":", "!", "-"}:
+                # "careful, the can is right beside the pan": what a warning is about is an obstacle
+                k = i + 2
+                while k < len(words) and words[k] not in _COPULAS and words[k] not in _SUBJECT_STOPS:
+                    k += 1
+                said = words[i + 2 : k]
+                if (
+                    said
+                    and k < len(words)
+                    and words[k] in _COPULAS
+                    and not any(self._is_verb(words, m) for m in range(i + 2, k))
+                ):
+                    spans.append((i + 2, k, i + 2, k, " ".join(words[i:k])))
             elif words[i] == "alone" and "leave" in words[max(0, i - 8) : i]:
                 leave = max(k for k in range(max(0, i - 8), i) if words[k] == "leave")
                 spans.append((leave + 1, i, leave, i + 1, " ".join(words[leave : i + 1])))
@@ -425,17 +446,20 @@ class OfflineDecomposer:
         k = i + 1
         while k < len(words) and words[k] in (":", ",", "is", "are", "'s", "include", "includes"):
             k += 1
-        if k > i + 1 and k < len(words):
+        # "the obstacle is the lamp", "obstacles: a mug"; not "the obstacle is next to the pan" (a place)
+        if k > i + 1 and k < len(words) and (words[k] not in _BOUNDARY or words[k] in DETERMINERS):
             end = k
-            while end < len(words) and not self._clause_ends(words, end) and words[end] not in _SENTENCE_END:
+            while end < len(words) and not self._clause_ends(words, end) and words[end] not in _COPULAS:
                 end += 1
             return k, end, i, end, " ".join(words[i:end])
+        if i and words[i - 1] in DETERMINERS:
+            return i, i + 1, i, i + 1, " ".join(words[i - 1 : i + 1])  # the simulator's "obstacle" itself
         return None
 
     def _subject_before(self, words: list[str], i: int, plural: bool = False) -> tuple[int, int]:
         """The noun phrase (or list, after a plural verb) that ends before words[i], skipping a copula."""
         j = i
-        while j > 0 and words[j - 1] in _COPULAS | {"also", "still", "currently", "right", "now", "just"}:
+        while j > 0 and words[j - 1] in _COPULAS | _STANCE | {"also", "still", "currently", "right", "now", "just"}:
             plural |= words[j - 1] in _PLURAL_COPULAS
             j -= 1
         end = start = j
@@ -488,6 +512,7 @@ class OfflineDecomposer:
         ref = self._chunk_to_ref(chunk)
         if ref is not None:
             parse.obstacles.append(ref)
+            parse.declared.append((index, ref))
             return
         said = [w for w in chunk if w not in DETERMINERS and w not in _PARTICLES and w not in _POLITE]
         if said:
@@ -503,7 +528,7 @@ class OfflineDecomposer:
         previous = ""
         vague = False  # "the thing next to the pan": a head that names no object ends the phrase too
         for word in chunk:
-            after_determiner = previous in DETERMINERS or previous in _MODIFIERS
+            after_determiner = previous in DETERMINERS or previous in COLOURS or previous in SIZE_WORDS
             previous = word
             # A function word straight after "the" is a noun after all ("the can").
             if word in _BOUNDARY and not after_determiner:
@@ -745,6 +770,10 @@ class OfflineDecomposer:
             others = [n for n in before if not any(_same_thing(skill, n, t) for t in targets)]
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)
+            declared_before = [k for k, _ in parse.declared if k < reference.index]
+            targets_before = [t.index for t in targets if t.index < reference.index]
+            if not others and declared_before and max(declared_before) > max(targets_before, default=-1):
+                continue  # "the plate is in the way, so go around it": an obstacle already
             if not others:
                 named = [t for t in sorted(targets, key=lambda t: t.index) if t.index < reference.index]
                 if named:

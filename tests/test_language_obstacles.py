@@ -161,6 +161,8 @@ PHRASAL = [
     ("Put the stapler away in the drawer", "put_item_in_drawer"),
     ("Stash the block in the drawer", "put_item_in_drawer"),
     ("Sweep up the crumbs into the dustpan", "sweep_to_dustpan"),
+    ("Take the cap off the wine bottle", "open_wine_bottle"),
+    ("Give the plant some water", "water_plants"),
 ]
 
 
@@ -260,6 +262,8 @@ NONSENSE = [
     ("Sweep the bowl into the pan", "'sweep' is not how bowl_pour is asked for"),
     ("Pour the pan into the bowl", "it asks to move things into the bowl, but bowl_pour carries the bowl to the pan"),
     ("Put the microwave in the drawer", "'microwave' cannot be carried by put_item_in_drawer"),
+    ("Take the block out of the drawer", "it asks to take something out of or off the drawer"),
+    ("Take the phone off the base", "it asks to take something out of or off the base"),
 ]
 
 

@@ -182,6 +182,7 @@ class _Noun:
     in_task: bool = True  # said in a sentence with a lexicon verb, not in "there are two bowls."
     landmark: bool = False  # after "next to", "under", ...: where something is, not what to act on
     destination: bool = False  # after "into" / "onto": where the carried object goes
+    source: bool = False  # after "from", "out of", "off": where something is taken from
 
     def ref(self, name: str | None = None) -> ObjectRef:
         return ObjectRef(name=name or self.name, color=self.color, size=self.size, position=self.position)
@@ -300,6 +301,7 @@ class OfflineDecomposer:
                 k -= 1
             noun.landmark = k >= 0 and task[k] in _LOCATIVES | {"to"} and (task[k] != "to" or task[k - 1] in _LOCATIVES)
             noun.destination = k >= 0 and task[k] in ("into", "onto")
+            noun.source = k >= 0 and (task[k] in ("from", "off") or (task[k] == "of" and task[k - 1 : k] == ["out"]))
         parse.obstacles = list(dict.fromkeys(parse.obstacles))
         return parse
 
@@ -717,6 +719,13 @@ class OfflineDecomposer:
             if wildcard and noun.name in fixtures:
                 raise InstructionNotUnderstoodError(instruction, f"'{noun.name}' cannot be carried by {skill.name}")
         carried = skill.carried_slot
+        for k, (noun, _) in assigned.items():
+            if carried is not None and k != carried and noun.source:
+                raise InstructionNotUnderstoodError(
+                    instruction,
+                    f"it asks to take something out of or off the {noun.name}, but {skill.name} puts the "
+                    f"{skill.slots[carried].word} there",
+                )
         if carried is not None and carried in assigned and assigned[carried][0].destination:
             others = [n for k, (n, _) in assigned.items() if k != carried]
             if others and not any(n.destination for n in others):

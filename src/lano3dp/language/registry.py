@@ -286,7 +286,7 @@ def default_registry() -> SkillRegistry:
             SkillSpec(
                 name="water_plants",
                 description="pour water on the plant with the watering can",
-                verbs=_verbs("water, irrigate, sprinkle"),
+                verbs=_verbs("water, irrigate, sprinkle, give water, pour water"),
                 slots=(
                     _slot("watering can", "sprinkler", "watering jug", carried=True),
                     _slot("plant", "flower", "houseplant"),
@@ -295,7 +295,10 @@ def default_registry() -> SkillRegistry:
             SkillSpec(
                 name="open_wine_bottle",
                 description="take the cork or cap off the wine bottle",
-                verbs=_verbs("open, uncork, uncap, unscrew, pop, decork, pop open, twist off, pull out"),
+                verbs=_verbs(
+                    "open, uncork, uncap, unscrew, pop, decork, remove, pop open, twist off, twist open, pull out, "
+                    "take off, pull off"
+                ),
                 slots=(_slot("bottle", "wine bottle", "wine"),),
             ),
         ]

@@ -14,8 +14,12 @@ def test_plan_prints_the_plan_as_json():
     assert result.exit_code == 0, result.output
     assert json.loads(result.stdout) == {
         "skill": "bowl_pour",
-        "targets": [{"name": "bowl", "color": "red", "size": None}, {"name": "pan", "color": None, "size": None}],
-        "obstacles": [{"name": "mug", "color": "blue", "size": None}],
+        "targets": [
+            {"name": "bowl", "color": "red", "size": None, "position": None},
+            {"name": "pan", "color": None, "size": None, "position": None},
+        ],
+        "obstacles": [{"name": "mug", "color": "blue", "size": None, "position": None}],
+        "warnings": [],
     }
 
 
@@ -35,7 +39,8 @@ def test_plan_reports_instructions_it_cannot_plan():
 def test_plan_schema_lists_the_skills():
     result = runner.invoke(app, ["plan", "--schema"])
     assert result.exit_code == 0
-    assert json.loads(result.stdout)["properties"]["skill"]["enum"][0] == "bowl_pour"
+    properties = json.loads(result.stdout)["properties"]
+    assert properties["skill"]["anyOf"][0]["enum"][0] == "bowl_pour" and "refusal" in properties
 
 
 def test_plan_with_an_unreachable_llm_falls_back_and_says_so():

@@ -45,6 +45,47 @@ def test_held_out_instruction_table_exact_plan_rate():
     assert rate >= 0.85, failures
 
 
+def _object_words(ref: dict) -> frozenset:
+    return frozenset(" ".join(str(ref.get(k) or "") for k in ("position", "size", "color", "name")).split())
+
+
+def test_second_held_out_table_plans_exactly_and_never_drops_an_obstacle():
+    """94 instructions written by someone who never read the rules (ObjectRef dicts; null = must be refused).
+
+    Objects compare as word sets ('top drawer' == position 'top' + name 'drawer'), targets in slot order,
+    obstacles as a multiset. Measured when the table arrived: 67% exact with 21 plans dropping a named
+    obstacle (the rules before issue 16), then 97% with none.
+    """
+    from collections import Counter
+
+    rows = json.loads((DATA / "instructions_heldout_2.json").read_text())
+    decomposer = OfflineDecomposer()
+    exact, wrong, dropped = 0, [], []
+    for row in rows:
+        try:
+            plan = decomposer.decompose(row["instruction"]).model_dump()
+        except Exception:  # a refusal
+            plan = None
+        expected = row["expected"]
+        if expected is None or plan is None:
+            ok = expected is None and plan is None
+        else:
+            def key(p):
+                return (p["skill"], [_object_words(t) for t in p["targets"]],
+                        Counter(_object_words(o) for o in p["obstacles"]))
+            ok = key(plan) == key(expected)
+            got = Counter(_object_words(o) for o in plan["obstacles"])
+            if any(got[w] < n for w, n in Counter(_object_words(o) for o in expected["obstacles"]).items()):
+                dropped.append(row["instruction"])
+        exact += ok
+        if not ok:
+            wrong.append(row["instruction"])
+    print(f"\nsecond held-out table: {exact}/{len(rows)} exact; wrong: {wrong}")
+    assert len(rows) >= 60
+    assert exact / len(rows) >= 0.95, wrong
+    assert dropped == []
+
+
 @pytest.fixture(scope="module")
 def decomposer():
     return OfflineDecomposer()
@@ -152,5 +193,9 @@ def test_the_registry_says_what_the_gripper_carries():
     for fixture_skill in ("open_drawer", "close_microwave", "open_wine_bottle"):
         assert registry.get(fixture_skill).carried_slot is None
     with pytest.raises(ValueError, match="at most one"):
-        SkillSpec(name="juggle", description="d", verbs=("juggle",),
-                  slots=(Slot(word="ball", carried=True), Slot(word="club", carried=True)))
+        SkillSpec(
+            name="juggle",
+            description="d",
+            verbs=("juggle",),
+            slots=(Slot(word="ball", carried=True), Slot(word="club", carried=True)),
+        )

@@ -5,6 +5,7 @@ from pydantic import ValidationError
 
 from lano3dp.language import (
     ObjectRef,
+    PlanReply,
     SkillRegistry,
     SlotMismatchError,
     TaskPlan,
@@ -43,15 +44,33 @@ def test_plan_round_trips_through_json():
     assert original.summary() == "bowl_pour(red bowl, pan); avoid blue mug"
 
 
-def test_json_schema_is_strict_and_enumerates_skills():
+def test_json_schema_is_strict_enumerates_skills_and_can_refuse():
     schema = plan_json_schema(default_registry().names)
-    assert schema["properties"]["skill"]["enum"][:3] == ["bowl_pour", "bottle_upright", "bottle_in_drawer"]
-    assert schema["required"] == ["skill", "targets", "obstacles"] and schema["additionalProperties"] is False
+    skill = schema["properties"]["skill"]["anyOf"]
+    assert skill[0]["enum"][:3] == ["bowl_pour", "bottle_upright", "bottle_in_drawer"] and skill[1] == {"type": "null"}
+    assert schema["required"] == ["refusal", "skill", "targets", "obstacles"]
+    assert schema["additionalProperties"] is False and "warnings" not in schema["properties"]
     ref = schema["$defs"]["ObjectRef"]
-    assert ref["required"] == ["name", "color", "size"] and ref["additionalProperties"] is False
+    assert ref["required"] == ["name", "color", "size", "position"] and ref["additionalProperties"] is False
     assert {"type": "null"} in ref["properties"]["color"]["anyOf"]
     # The export must not mutate pydantic's cached schema.
     assert "enum" not in TaskPlan.model_json_schema()["properties"]["skill"]
+
+
+def test_a_reply_is_a_plan_or_an_explicit_refusal():
+    reply = PlanReply(skill="open_drawer", targets=[ObjectRef(name="drawer", position="top")])
+    assert reply.to_plan().summary() == "open_drawer(top drawer)"
+    with pytest.raises(ValueError, match="refused: no skill makes coffee"):
+        PlanReply(refusal="no skill makes coffee").to_plan()
+    with pytest.raises(ValueError, match="neither a skill nor a refusal"):
+        PlanReply().to_plan()
+
+
+def test_position_words_are_part_of_the_phrase_and_warnings_travel_with_the_plan():
+    ref = ObjectRef(name="bowl", color="red", size="small", position="Left")
+    assert ref.phrase == "left small red bowl"
+    plan = TaskPlan(skill="open_drawer", targets=[ObjectRef(name="drawer")], warnings=["'it' may mean a or b"])
+    assert TaskPlan.model_validate_json(plan.model_dump_json()).warnings == ["'it' may mean a or b"]
 
 
 def test_default_registry_covers_the_simulator_tasks_with_ordered_slots():

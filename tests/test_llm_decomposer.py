@@ -8,7 +8,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 
 import pytest
 
-from lano3dp.language import ObjectRef, TaskPlan
+from lano3dp.language import ObjectRef, TaskPlan, UnknownObjectError
 from lano3dp.language.llm import LLMConfig, LLMDecomposer, LLMFallbackWarning, LLMPlanError
 
 GOOD = {
@@ -114,7 +114,7 @@ def test_valid_reply_is_parsed_and_the_request_is_structured(fake_llm):
     assert fake_llm.headers[0]["authorization"] == "Bearer secret"
     response_format = request["response_format"]
     assert response_format["type"] == "json_schema" and response_format["json_schema"]["strict"] is True
-    assert "bowl_pour" in response_format["json_schema"]["schema"]["properties"]["skill"]["enum"]
+    assert "bowl_pour" in response_format["json_schema"]["schema"]["properties"]["skill"]["anyOf"][0]["enum"]
     system, user = request["messages"]
     assert "bowl_pour: grasp the bowl and pour its contents into the pan. targets: bowl, pan" in system["content"]
     assert user["content"] == f"Instruction: {INSTRUCTION}"
@@ -144,7 +144,8 @@ def test_two_bad_replies_fall_back_to_the_offline_parser_with_a_warning(fake_llm
     fake_llm.script = ["not json", swapped]
     with pytest.warns(LLMFallbackWarning, match="in the order \\(bowl, pan\\)"):
         outcome = decomposer(fake_llm).decompose_with_report(INSTRUCTION)
-    assert outcome.source == "offline_fallback" and outcome.plan == expected_plan()
+    assert outcome.source == "offline_fallback" and outcome.plan.model_copy(update={"warnings": []}) == expected_plan()
+    assert outcome.plan.warnings[0].startswith("LLM plan rejected (the reply does not match the schema")
     assert len(fake_llm.requests) == 2 and len(outcome.errors) == 2
     assert outcome.replies[0] == "not json"
 
@@ -156,12 +157,15 @@ def test_extra_keys_such_as_code_are_rejected_not_run(fake_llm):
     assert "code: Extra inputs are not permitted" in outcome.errors[0]
 
 
-def test_objects_missing_from_the_scene_are_sent_back(fake_llm):
+def test_objects_missing_from_the_scene_are_sent_back_but_never_dropped(fake_llm):
     fake_llm.script = [GOOD, dict(GOOD, obstacles=[])]
-    outcome = decomposer(fake_llm).decompose_with_report(INSTRUCTION, scene_objects=["red_bowl", "pan"])
-    assert outcome.source == "llm_retry" and outcome.plan.obstacles == []
+    with pytest.warns(LLMFallbackWarning, match="the plan has no such obstacle"):
+        with pytest.raises(UnknownObjectError, match="obstacle 'blue mug' is not in the scene") as raised:
+            decomposer(fake_llm).decompose_with_report(INSTRUCTION, scene_objects=["red_bowl", "pan"])
     assert "Objects in the scene (use only these): red_bowl, pan" in fake_llm.requests[0]["messages"][1]["content"]
     assert "obstacle 'blue mug' is not in the scene" in fake_llm.requests[1]["messages"][-1]["content"]
+    # The rules refuse too, and the refusal still says why the LLM was passed over.
+    assert "LLM plan rejected" in raised.value.__notes__[0]
 
 
 def test_slow_endpoint_times_out_and_falls_back(fake_llm):
@@ -174,9 +178,10 @@ def test_slow_endpoint_times_out_and_falls_back(fake_llm):
 
 
 def test_server_error_falls_back_and_no_fallback_raises(fake_llm):
-    fake_llm.script = [("status", 500)]
+    fake_llm.script = [("status", 500)] * 3  # every response format the negotiation tries
     with pytest.warns(LLMFallbackWarning, match="InternalServerError"):
-        assert decomposer(fake_llm).decompose(INSTRUCTION) == expected_plan()
+        plan = decomposer(fake_llm).decompose(INSTRUCTION)
+    assert plan.model_copy(update={"warnings": []}) == expected_plan() and len(fake_llm.requests) == 3
     fake_llm.script = ["nope", "still nope"]
     strict = LLMDecomposer(LLMConfig(base_url=fake_llm.url, model="m", timeout=5), fallback=None)
     with warnings.catch_warnings():
@@ -210,5 +215,7 @@ def test_config_from_environment(monkeypatch):
 def test_llm_synonyms_are_grounded_in_the_scene(fake_llm):
     skillet = dict(GOOD, targets=[GOOD["targets"][0], {"name": "skillet", "color": None, "size": None}], obstacles=[])
     fake_llm.script = [skillet]
-    outcome = decomposer(fake_llm).decompose_with_report(INSTRUCTION, scene_objects=["red_bowl", "frying_pan"])
+    outcome = decomposer(fake_llm).decompose_with_report(
+        "Pour the red bowl into the skillet", scene_objects=["red_bowl", "frying_pan"]
+    )
     assert outcome.source == "llm" and outcome.plan.target_phrases == ["red bowl", "pan"]

@@ -9,11 +9,12 @@ from lano3dp.language.exceptions import (
     LanguageError,
     PlanValidationError,
     SlotMismatchError,
+    UncertainObstacleError,
     UnknownObjectError,
     UnknownSkillError,
 )
 from lano3dp.language.offline import OfflineDecomposer
-from lano3dp.language.plan import ObjectRef, TaskPlan, plan_json_schema
+from lano3dp.language.plan import ObjectRef, PlanReply, TaskPlan, plan_json_schema
 from lano3dp.language.registry import SkillRegistry, SkillSpec, Slot, default_registry
 
 __all__ = [
@@ -21,12 +22,14 @@ __all__ = [
     "LanguageError",
     "ObjectRef",
     "OfflineDecomposer",
+    "PlanReply",
     "PlanValidationError",
     "SkillRegistry",
     "SkillSpec",
     "Slot",
     "SlotMismatchError",
     "TaskPlan",
+    "UncertainObstacleError",
     "UnknownObjectError",
     "UnknownSkillError",
     "default_registry",

@@ -46,3 +46,8 @@ class InstructionNotUnderstoodError(LanguageError, ValueError):
     def __init__(self, instruction: str, reason: str):
         self.instruction = instruction
         super().__init__(f"cannot plan '{instruction}': {reason}")
+
+
+class UncertainObstacleError(InstructionNotUnderstoodError):
+    """Words after an avoidance cue (or an "is in the way" predicate) name no object the parser can
+    point at, e.g. "avoid it" with nothing named before: refusing beats planning without the obstacle."""

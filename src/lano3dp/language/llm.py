@@ -1,9 +1,15 @@
 """LLM decomposer: any OpenAI-compatible endpoint (OpenAI, vLLM, Ollama's /v1, llama.cpp server).
 
-The reply is only ever parsed as JSON and validated (pydantic, then the skill registry and the
-scene); it is never executed. An invalid reply gets one retry with the validation error added
-to the conversation; if that fails too, or the endpoint is unreachable or slow, the offline
-rule parser answers instead and a `LLMFallbackWarning` says why.
+The reply is only ever parsed as JSON and validated (pydantic, then the skill registry, a
+cross-check against the instruction, then the scene); it is never executed. The model may
+refuse explicitly (`PlanReply.refusal`). An invalid reply gets one retry with the problem added
+to the conversation; if that fails too, the model refuses, or the endpoint is unreachable or
+slow, the offline rule parser answers instead and a `LLMFallbackWarning` says why (also when
+the rules then refuse too).
+
+The response format is negotiated: a JSON schema where the server takes one; a server that
+answers it with an HTTP error (llama.cpp's answers 500) is asked again in JSON mode, with the
+schema in the request (llama.cpp turns it into a grammar) and always in the prompt.
 """
 
 from __future__ import annotations
@@ -17,9 +23,10 @@ from typing import Literal
 
 from pydantic import ValidationError
 
+from lano3dp.language.crosscheck import cross_check
 from lano3dp.language.exceptions import LanguageError, PlanValidationError
 from lano3dp.language.offline import OfflineDecomposer
-from lano3dp.language.plan import TaskPlan, plan_json_schema
+from lano3dp.language.plan import PlanReply, TaskPlan, plan_json_schema
 from lano3dp.language.registry import SceneObjects, SkillRegistry, default_registry, describe_scene
 
 _FENCE = re.compile(r"^\s*```(?:json)?\s*(.*?)\s*```\s*$", re.DOTALL)
@@ -31,6 +38,15 @@ class LLMFallbackWarning(UserWarning):
 
 class LLMPlanError(LanguageError):
     """The LLM gave no valid plan and no fallback was configured."""
+
+
+class LLMRefusedError(LLMPlanError):
+    """The model said no skill can do the instruction, and no fallback was configured."""
+
+
+# HTTP statuses with which servers reject a response format they do not support (llama.cpp: 500).
+_FORMAT_REJECTED = frozenset({400, 415, 422, 500, 501})
+_FORMATS = ("json_schema", "json_object_schema", "json_object")
 
 
 def _env(*names: str) -> str | None:
@@ -45,19 +61,23 @@ class LLMConfig:
         base_url: endpoint root, e.g. "http://127.0.0.1:8000/v1"; None means api.openai.com.
         model: model name the endpoint serves.
         api_key: bearer token; local servers accept any non-empty string.
-        timeout: seconds per request (no automatic HTTP retries: a slow LLM falls back instead).
-        response_format: "json_schema" (OpenAI, vLLM, Ollama) or "json_object" (llama.cpp's server,
-            which rejects json_schema); the schema is in the prompt either way.
-        temperature, max_tokens: decoding settings.
+        timeout: seconds per request (no automatic HTTP retries: a slow LLM falls back instead); a
+            request that runs out of time is cancelled (its connection closed, which stops generation
+            on llama.cpp and vLLM).
+        response_format: "auto" (default: json_schema, and JSON mode with the schema where the server
+            rejects that), or one of "json_schema" (OpenAI, vLLM, Ollama), "json_object" (JSON mode,
+            schema in the prompt only) to skip the negotiation.
+        temperature, max_tokens: decoding settings; a plan is under 150 tokens, so a small bound
+            stops a model that rambles instead of letting it run to the timeout.
     """
 
     base_url: str | None = None
     model: str = "gpt-4o-mini"
     api_key: str | None = None
     timeout: float = 30.0
-    response_format: Literal["json_schema", "json_object"] = "json_schema"
+    response_format: Literal["auto", "json_schema", "json_object"] = "auto"
     temperature: float = 0.0
-    max_tokens: int = 512
+    max_tokens: int = 256
 
     @classmethod
     def from_env(cls, **overrides) -> LLMConfig:
@@ -85,17 +105,21 @@ class PlanOutcome:
         source: "llm" (first reply valid), "llm_retry" (valid after one correction) or "offline_fallback".
         errors: what was wrong with each rejected reply, or why the endpoint failed.
         replies: the raw LLM replies, for logs.
+        response_format: the format the server took ("json_schema", "json_object_schema", "json_object"),
+            or None if none was.
     """
 
     plan: TaskPlan
     source: Literal["llm", "llm_retry", "offline_fallback"]
     errors: list[str] = field(default_factory=list)
     replies: list[str] = field(default_factory=list)
+    response_format: str | None = None
 
 
 def system_prompt(registry: SkillRegistry) -> str:
     lines = [
         "You turn a robot user's instruction into a task plan, as one JSON object and nothing else.",
+        "If no skill below can do the instruction, reply with `refusal` set to the reason and `skill` null.",
         "Skills (choose exactly one; its targets go in the order given):",
     ]
     for skill in registry:
@@ -105,19 +129,31 @@ def system_prompt(registry: SkillRegistry) -> str:
         "- `targets` has one object per slot of the chosen skill, in slot order; an object the instruction"
         " leaves implicit gets the slot word (e.g. 'water the plant' -> watering can, plant).",
         "- Use the slot word as `name` when the user uses a synonym (skillet -> pan); otherwise the noun said.",
-        "- `color` and `size` hold the colour and size words said for that object, else null.",
-        "- `obstacles` are the objects the user says to avoid, not touch, keep clear of, or that are in the way.",
-        "- Objects mentioned for no reason are neither targets nor obstacles.",
+        "- `color`, `size` and `position` hold the colour, size and position words said for that object"
+        " ('red', 'small', 'top', 'left', 'nearest'), else null.",
+        "- `obstacles` are every object the user says to avoid, not touch, keep clear of, that is in the way,"
+        " that counts as an obstacle, or 'but not'; a pronoun ('avoid it') means the object named before it,"
+        " never a target.",
+        "- Objects mentioned for no reason are neither targets nor obstacles; never name an object the"
+        " instruction does not mention (except a slot word it leaves implicit).",
+        "- `refusal` is null when you give a plan.",
         "JSON schema of the reply: " + json.dumps(plan_json_schema(registry.names), separators=(",", ":")),
     ]
     return "\n".join(lines)
+
+
+class _Refused(Exception):
+    """The model declined; not an invalid reply, so it is not sent back for correction."""
 
 
 def _parse_reply(content: str | None) -> TaskPlan:
     if not content or not content.strip():
         raise ValueError("the reply was empty")
     fenced = _FENCE.match(content)
-    return TaskPlan.model_validate_json(fenced.group(1) if fenced else content.strip())
+    reply = PlanReply.model_validate_json(fenced.group(1) if fenced else content.strip())
+    if reply.refusal:
+        raise _Refused(reply.refusal)
+    return reply.to_plan()
 
 
 class LLMDecomposer:
@@ -143,6 +179,9 @@ class LLMDecomposer:
         # Maps the LLM's words onto scene object kinds the same way the rule parser does.
         self._grounder = self.fallback or OfflineDecomposer(self.registry)
         self._client = client
+        self._owns_client = client is None
+        self._format: str | None = None  # the negotiated response format, once a server took one
+        self.format_errors: list[str] = []  # formats the server rejected, for logs
 
     @property
     def client(self):
@@ -174,17 +213,28 @@ class LLMDecomposer:
         replies: list[str] = []
         for attempt in range(2):
             try:
-                content = self._ask(messages)
+                content, cut_off = self._ask(messages)
             except openai.OpenAIError as error:
                 errors.append(f"endpoint error: {type(error).__name__}: {error}")
                 break
             replies.append(content or "")
             try:
+                if cut_off:
+                    raise ValueError(f"the reply was cut off at max_tokens={self.config.max_tokens}; JSON only")
                 plan = _parse_reply(content)
+                self.registry.validate(plan)  # skill and slot order first: their messages are the clearest
+                check = cross_check(plan, instruction, self._grounder, scene_objects)
+                if check.errors:
+                    raise ValueError("the plan does not match the instruction: " + "; ".join(check.errors))
                 if scene_objects is not None:
                     plan = self._grounder.ground(plan, scene_objects)
                 plan = self.registry.validate(plan, scene_objects)
-                return PlanOutcome(plan, "llm" if attempt == 0 else "llm_retry", errors, replies)
+                plan = plan.model_copy(update={"warnings": [*plan.warnings, *check.warnings]})
+                source = "llm" if attempt == 0 else "llm_retry"
+                return PlanOutcome(plan, source, errors, replies, self._format)
+            except _Refused as refusal:
+                errors.append(f"the model refused: {refusal}")
+                break
             except (ValueError, ValidationError, PlanValidationError) as error:
                 problem = _describe(error)
                 errors.append(problem)
@@ -196,31 +246,69 @@ class LLMDecomposer:
                     },
                 ]
         if self.fallback is None:
-            raise LLMPlanError(f"the LLM gave no valid plan for '{instruction}': {'; '.join(errors)}")
-        warnings.warn(
-            LLMFallbackWarning(f"LLM plan rejected ({'; '.join(errors)}); using the offline parser"), stacklevel=2
-        )
-        return PlanOutcome(self.fallback.decompose(instruction, scene_objects), "offline_fallback", errors, replies)
+            kind = LLMRefusedError if errors and errors[-1].startswith("the model refused") else LLMPlanError
+            raise kind(f"the LLM gave no valid plan for '{instruction}': {'; '.join(errors)}")
+        message = f"LLM plan rejected ({'; '.join(errors)}); using the offline parser"
+        # Warned before the fallback runs, so a caller sees why the LLM was passed over even if the rules refuse.
+        warnings.warn(LLMFallbackWarning(message), stacklevel=2)
+        try:
+            plan = self.fallback.decompose(instruction, scene_objects)
+        except LanguageError as error:
+            error.add_note(message)
+            raise
+        plan = plan.model_copy(update={"warnings": [message, *plan.warnings]})
+        return PlanOutcome(plan, "offline_fallback", errors, replies, self._format)
 
-    def _ask(self, messages: list[dict]) -> str | None:
-        if self.config.response_format == "json_schema":
-            response_format = {
-                "type": "json_schema",
-                "json_schema": {"name": "task_plan", "strict": True, "schema": plan_json_schema(self.registry.names)},
-            }
+    def _response_format(self, name: str) -> dict:
+        schema = plan_json_schema(self.registry.names)
+        if name == "json_schema":
+            return {"type": "json_schema", "json_schema": {"name": "task_plan", "strict": True, "schema": schema}}
+        if name == "json_object_schema":
+            return {"type": "json_object", "schema": schema}  # llama.cpp's server compiles it into a grammar
+        return {"type": "json_object"}
+
+    def _ask(self, messages: list[dict]) -> tuple[str | None, bool]:
+        """One request: (the reply's text, whether max_tokens cut it off); negotiates the response
+        format on the first call ("auto")."""
+        import openai
+
+        if self._format is not None:
+            candidates = [self._format]
+        elif self.config.response_format == "auto":
+            candidates = list(_FORMATS)
         else:
-            response_format = {"type": "json_object"}
-        response = self.client.chat.completions.create(
-            model=self.config.model,
-            messages=messages,
-            response_format=response_format,
-            temperature=self.config.temperature,
-            max_tokens=self.config.max_tokens,
-            timeout=self.config.timeout,
-        )
+            candidates = [self.config.response_format]
+        for k, name in enumerate(candidates):
+            try:
+                response = self.client.chat.completions.create(
+                    model=self.config.model,
+                    messages=messages,
+                    response_format=self._response_format(name),
+                    temperature=self.config.temperature,
+                    max_tokens=self.config.max_tokens,
+                    timeout=self.config.timeout,
+                )
+            except openai.APIStatusError as error:
+                if error.status_code in _FORMAT_REJECTED and k + 1 < len(candidates):
+                    self.format_errors.append(f"{name}: HTTP {error.status_code}")
+                    continue
+                raise
+            except openai.APITimeoutError:
+                self._cancel()
+                raise
+            self._format = name
+            break
         if not response.choices:
-            return None
-        return response.choices[0].message.content
+            return None, False
+        choice = response.choices[0]
+        return choice.message.content, choice.finish_reason == "length"
+
+    def _cancel(self) -> None:
+        """Drop the connection of a timed-out request: servers stop generating for a closed connection."""
+        client = self._client
+        if self._owns_client and client is not None:
+            client.close()
+            self._client = None
 
 
 def _describe(error: Exception) -> str:

@@ -1,17 +1,24 @@
 """Offline instruction decomposer: rules over a verb lexicon and noun phrases, no model needed.
 
 How an instruction is read (each step is a small function below):
-1. Tokenise; find obstacle cues ("avoid", "without touching", "keep clear of", "watch out
-   for", "X in the way", ...). Everything a cue governs, up to the next clause, is a list of
-   obstacle noun phrases split on "and", "or" and commas.
-2. In the rest, find verbs from the registry's lexicon and object nouns: registry slot words
-   and synonyms (longest first, so "frying pan" beats "pan"), scene object kinds, and any head
-   noun after a determiner ("the stapler"). Colour and size words in front become attributes.
-3. Score each skill: 2 for a lexicon verb, 1 per slot filled by a synonym, 0.5 per wildcard
+0. Tokenise; move post-nominal positions in front ("the bowl on the left" -> "the left bowl")
+   and resolve "one"-anaphora ("a red one" -> "a red bowl").
+1. Find obstacle declarations: cues ("avoid", "without touching", "keep clear of", "watch out
+   for", "but not", ...) govern the words up to the next clause; predicates ("X is in the way",
+   "there is an X on the path", "X counts as an obstacle", "X must not be touched") govern the
+   noun phrase they are said of. Either is a list of noun phrases split on "and", "or" and commas.
+   A pronoun there ("avoid it", "the other one") is resolved after the skill is known, never to a
+   target; words that name no object are a warning, a reference to nothing is a refusal.
+2. In the rest, find verbs from the registry's lexicon (phrasal verbs too, with the particle
+   anywhere in the clause: "pull the drawer out") and object nouns: registry slot words and
+   synonyms (longest first, so "frying pan" beats "pan"), scene object kinds, and any head noun
+   after a determiner ("the stapler"). Colour, size and position words in front become attributes.
+3. Score each skill: 2 for a lexicon verb (+0.5 for a phrasal one), 1 per slot filled by a synonym, 0.5 per wildcard
    fill, -1 per registry object noun the skill has no place for; the best skill wins (ties
    and scores under 2 are errors, not guesses).
 4. Map nouns onto the winning skill's slots in slot order; a slot nobody mentioned gets its
    own word ("water the plant" -> watering can, plant), since the policy needs that object.
+   An obstacle that is one of the targets ("pour the bowl, don't spill the bowl") is dropped with a warning.
 
 An optional `PhraseMatcher` (sentence embeddings) maps verbs and nouns the lexicon lacks onto
 the registry and the scene; only the verb phrase is embedded, since whole-sentence embeddings
@@ -25,7 +32,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from lano3dp.language.exceptions import InstructionNotUnderstoodError, UnknownObjectError
+from lano3dp.language.exceptions import InstructionNotUnderstoodError, UncertainObstacleError, UnknownObjectError
 from lano3dp.language.plan import ObjectRef, TaskPlan
 from lano3dp.language.registry import (
     SceneObjects,
@@ -40,9 +47,17 @@ from lano3dp.perception.sim_oracle import COLOURS, SIZE_WORDS, canonical_attribu
 _WORD = re.compile(r"[a-z]+(?:'[a-z]+)?|[.,;:!?]")
 _SENTENCE_END = frozenset(".;:!?")
 DETERMINERS = frozenset(
-    """the a an this that these those its my your our their his her some any another other both either each
+    """the a an this that these those its my your our their his her some any another both either each
     all two three four few several""".split()
 )
+# Position words, kept as said; like colours they narrow which instance is meant ("the top drawer").
+POSITION_WORDS = {
+    w: w
+    for w in """top upper uppermost topmost bottom lower lowest bottommost left leftmost right rightmost front
+    frontmost back rear rearmost nearest closest farthest furthest centre center middle first second third
+    last other""".split()
+}
+_MODIFIERS = COLOURS | SIZE_WORDS.keys() | POSITION_WORDS.keys()
 # Words that end a noun phrase: prepositions, conjunctions, adverbs of place, pronouns.
 _BOUNDARY = frozenset(
     """in into on onto over under from to with without of at by near next beside behind inside out up down
@@ -54,25 +69,70 @@ _BOUNDARY = frozenset(
 _NON_OBJECTS = frozenset(
     """left right side top bottom middle front back edge corner table counter way time contents content
     water liquid soup stuff one ones area spot place workspace dirt dust crumb crumbs trash mess debris
-    cork lid door what thing everything something nothing robot okay ok sure bit""".split()
+    cork lid door what thing everything something nothing anything robot okay ok sure bit path route""".split()
 )
 _COLLISION_VERBS = frozenset(
-    "touch hit bump knock disturb topple collide crash brush graze nudge move tip spill".split()
+    """touch hit bump knock disturb topple collide crash brush graze nudge move tip spill strike smash break
+    jostle upset rattle scrape scratch damage push shove bang clip snag contact run go come""".split()
 )
-_PARTICLES = frozenset("over into against with on off".split())
-_PRONOUN_PHRASES = (["it"], ["them"], ["that"], ["that", "one"], ["those"], ["this"], ["this", "one"])
+_PARTICLES = frozenset("over into against with on off near to close next too by past around of".split())
+_PRONOUNS = {
+    ("it",): "it", ("that",): "it", ("this",): "it", ("that", "one"): "it", ("this", "one"): "it",
+    ("them",): "them", ("those",): "them", ("these",): "them", ("they",): "them", ("both",): "them",
+    ("the", "other"): "other", ("the", "other", "one"): "other", ("the", "others"): "them",
+    ("the", "other", "ones"): "them", ("other",): "other",
+}  # fmt: skip
 _LIST_SEPARATORS = frozenset({"and", "or", ",", "nor", "plus"})
 _CLAUSE_ENDS = frozenset({"then", "while", "but", "before", "after", "when", "so", "once", "until", "because"})
 _POLITE = frozenset("please could would can will you robot okay ok now i need want to like kindly go ahead".split())
+_COPULAS = frozenset("is are 's was were be been being sits sit stands stand lies lie".split())
+_PLURAL_COPULAS = frozenset("are were sit stand lie".split())
+_WARNINGS = frozenset("careful caution warning attention heads".split())
+_STANCE = frozenset("sitting standing lying placed located resting positioned kept".split())
+# Words before a noun that make it a landmark ("the drawer under the microwave"), not a task object.
+_LOCATIVES = frozenset("next near beside behind under below beneath above by besides opposite of close".split())
+# Verbs any manipulation can be said with; a skill that owns none of the others was not asked for.
+_GENERIC_VERBS = frozenset("put place set move take get bring transfer drop rest return raise fill".split())
 
-# Obstacle cues as token patterns; "<ing>" is any -ing word, "<hit>" a collision verb.
+# Obstacle cues as token patterns; "<ing>" is any -ing word, "<hit>" a collision verb, "<det>" a determiner.
 _CUES: tuple[tuple[str, ...], ...] = (
     ("avoid",), ("avoiding",), ("avoids",), ("around",), ("dodge",), ("dodging",),
-    ("without", "<ing>"), ("careful", "not", "to", "<hit>"), ("careful", "of"), ("careful", "with"),
-    ("careful", "around"), ("careful", "near"), ("watch", "out", "for"), ("look", "out", "for"),
-    ("beware", "of"), ("mind",), ("clear", "of"), ("away", "from"), ("not", "to", "<hit>"),
-    ("don't", "<hit>"), ("dont", "<hit>"), ("not", "<hit>"), ("never", "<hit>"),
+    ("without", "<ing>"), ("no", "<ing>"), ("careful", "not", "to", "<hit>"), ("careful", "of"),
+    ("careful", "with"), ("careful", "around"), ("careful", "near"), ("watch", "out", "for"),
+    ("look", "out", "for"), ("beware", "of"), ("mind",), ("clear", "of"), ("away", "from"),
+    ("distance", "from"), ("far", "from"), ("nowhere", "near"), ("not", "to", "<hit>"), ("don't", "<hit>"),
+    ("dont", "<hit>"), ("not", "<hit>"), ("never", "<hit>"), ("but", "not"), ("and", "not"),
+    ("not", "near"), ("not", "close", "to"), ("not", "<det>"), ("watch", "<det>"),
 )  # fmt: skip
+# Predicates said of the noun phrase before them ("the mug is in the way").
+_WAY_MARKERS: tuple[tuple[str, ...], ...] = (
+    ("in", "the", "way"), ("in", "my", "way"), ("in", "your", "way"), ("in", "its", "way"),
+    ("in", "the", "path"), ("on", "the", "path"), ("in", "the", "robot", "'s", "way"), ("on", "the", "route"),
+    ("blocking",), ("blocks",), ("obstructing",), ("obstructs",), ("untouched",),
+    ("must", "not", "be", "<hit>"), ("mustn't", "be", "<hit>"), ("should", "not", "be", "<hit>"),
+    ("shouldn't", "be", "<hit>"), ("not", "to", "be", "<hit>"), ("can't", "be", "<hit>"), ("cannot", "be", "<hit>"),
+)  # fmt: skip
+_OBSTACLE_NOUNS = frozenset("obstacle obstacles obstruction obstructions hazard hazards".split())
+# Words between a subject and "obstacle" ("the lamp counts as an obstacle", "treat the lamp as one").
+_PREDICATE_FILLER = frozenset(
+    "a an as one the is are 's be was were counts count acts act serves serve considered treated regarded also "
+    "both all just like another".split()
+)
+# Words a subject noun phrase never reaches back over.
+_SUBJECT_STOPS = (
+    _SENTENCE_END | _CLAUSE_ENDS | _COPULAS | frozenset(
+        """there treat consider regard mark note remember know see notice think careful that with in into on onto
+        from to at by near next beside behind under over inside through toward towards for if""".split()
+    )
+)  # fmt: skip
+
+
+def tokenize(text: str) -> list[str]:
+    """Lower-case words and punctuation; "bowl's" -> bowl 's, "there's" -> there 's (the noun stays a noun)."""
+    words = []
+    for word in _WORD.findall(text.lower().replace("’", "'")):
+        words.extend([word[:-2], "'s"] if word.endswith("'s") and len(word) > 2 else [word])
+    return words
 
 
 def lemmas(word: str) -> set[str]:
@@ -98,6 +158,8 @@ def _matches(pattern: str, word: str) -> bool:
         return word.endswith("ing") and len(word) > 4
     if pattern == "<hit>":
         return bool(lemmas(word) & _COLLISION_VERBS)
+    if pattern == "<det>":
+        return word in DETERMINERS
     return pattern == word
 
 
@@ -115,10 +177,24 @@ class _Noun:
     color: str | None
     size: str | None
     known: bool  # a registry or scene word, not just a head noun after a determiner
-    position: int = 0  # token index, to resolve "avoid it" to the object named before
+    index: int = 0  # token index, to resolve "avoid it" to the object named before
+    position: str | None = None
+    in_task: bool = True  # said in a sentence with a lexicon verb, not in "there are two bowls."
+    landmark: bool = False  # after "next to", "under", ...: where something is, not what to act on
+    destination: bool = False  # after "into" / "onto": where the carried object goes
+    source: bool = False  # after "from", "out of", "off": where something is taken from
 
     def ref(self, name: str | None = None) -> ObjectRef:
-        return ObjectRef(name=name or self.name, color=self.color, size=self.size)
+        return ObjectRef(name=name or self.name, color=self.color, size=self.size, position=self.position)
+
+
+@dataclass(frozen=True)
+class _Reference:
+    """A pronoun in an obstacle declaration ("avoid it", "the other one"), resolved once the skill is known."""
+
+    index: int
+    kind: str  # "it" (one object), "them" (all), "other" (the one that is not the target)
+    text: str  # the declaration as said, for messages
 
 
 @dataclass
@@ -131,7 +207,9 @@ class Parse:
     nouns: list[_Noun] = field(default_factory=list)
     obstacles: list[ObjectRef] = field(default_factory=list)
     scores: dict[str, float] = field(default_factory=dict)
-    pronoun_obstacles: list[int] = field(default_factory=list)  # token index of "avoid it"-style cues
+    references: list[_Reference] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    declared: list[tuple[int, ObjectRef]] = field(default_factory=list)  # (token index, obstacle) as declared
 
 
 class OfflineDecomposer:
@@ -154,6 +232,8 @@ class OfflineDecomposer:
         self.match_threshold = match_threshold
         all_verbs = dict.fromkeys(v for s in self.registry for v in s.verbs)
         self._verbs = {verb: [s.name for s in self.registry if verb in s.verbs] for verb in all_verbs}
+        self._single_verbs = {v for v in self._verbs if " " not in v}
+        self._phrasal = [tuple(v.split()) for v in self._verbs if " " in v]
         self._vocabulary = sorted(
             {w for s in self.registry for slot in s.slots for w in slot.synonyms}, key=lambda w: -len(w.split())
         )
@@ -163,16 +243,21 @@ class OfflineDecomposer:
     def decompose(self, instruction: str, scene_objects: SceneObjects | None = None) -> TaskPlan:
         """Plan for `instruction`; with `scene_objects` (names like "red_bowl", or a name -> attributes
         mapping such as `frame.instance_attributes`), objects are checked against (and synonyms mapped
-        onto) the scene.
+        onto) the scene. What the parser was unsure of is in `plan.warnings`.
 
         Raises:
             InstructionNotUnderstoodError: no skill, or two equally likely skills.
+            UncertainObstacleError: an obstacle declaration refers to nothing ("avoid it" with nothing
+                named before).
             UnknownObjectError / SlotMismatchError: the plan does not fit the scene or the skill.
         """
         parse = self.parse(instruction, scene_objects)
         skill = self._choose_skill(instruction, parse)
-        self._resolve_pronoun_obstacles(skill, parse)
-        plan = TaskPlan(skill=skill.name, targets=self._fill_slots(skill, parse.nouns), obstacles=parse.obstacles)
+        self._check_fit(instruction, skill, parse)
+        self._resolve_references(instruction, skill, parse)
+        targets = self._fill_slots(skill, parse.nouns)
+        obstacles = self._drop_targets(skill, targets, parse)
+        plan = TaskPlan(skill=skill.name, targets=targets, obstacles=obstacles, warnings=parse.warnings)
         if scene_objects is not None:
             plan = self._ground_in_scene(plan, skill, scene_objects)
         return self.registry.validate(plan, scene_objects)
@@ -191,46 +276,101 @@ class OfflineDecomposer:
         return self._ground_in_scene(plan, skill, scene_objects)
 
     def parse(self, instruction: str, scene_objects: SceneObjects | None = None) -> Parse:
-        words = []
-        for word in _WORD.findall(instruction.lower().replace("’", "'")):
-            # "bowl's" -> bowl 's, "there's" -> there 's: the noun stays a noun.
-            words.extend([word[:-2], "'s"] if word.endswith("'s") and len(word) > 2 else [word])
-        parse = Parse(tokens=words)
+        words = tokenize(instruction)
+        scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
+        vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
+        words = _front_positions(words)
+        words = self._resolve_one_anaphora(words, vocabulary)
+        parse = Parse(tokens=list(words))
         task_mask = [True] * len(words)
-        for start, end in self._obstacle_spans(words):
-            if [w for w in words[start:end] if w not in _SENTENCE_END and w != ","] in _PRONOUN_PHRASES:
-                parse.pronoun_obstacles.append(start)
-            parse.obstacles.extend(self._noun_phrase_list(words[start:end]))
-            for i in range(start, end):
-                task_mask[i] = False
-        for start, end, stop in self._in_the_way_spans(words):
-            parse.obstacles.extend(self._noun_phrase_list(words[start:end]))
-            for i in range(start, stop):
+        spans = [(start, end, start, end, cue) for start, end, cue in self._obstacle_spans(words)]
+        spans += self._predicate_spans(words)
+        for start, end, mask_start, mask_stop, cue in sorted(spans):
+            self._read_declaration(words, start, end, cue, parse)
+            for i in range(mask_start, mask_stop):
                 task_mask[i] = False
         task = [w if keep else "," for w, keep in zip(words, task_mask, strict=True)]
         verb_positions = self._find_verbs(task, parse)
-        scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
-        parse.nouns = self._find_nouns(task, verb_positions, scene_kinds)
+        parse.nouns = self._find_nouns(task, verb_positions, vocabulary)
+        sentence = [sum(w in _SENTENCE_END for w in words[:i]) for i in range(len(words))]
+        with_verb = {sentence[i] for i in verb_positions}
+        for noun in parse.nouns:
+            noun.in_task = not with_verb or sentence[noun.index] in with_verb
+            k = noun.index - 1
+            while k >= 0 and (task[k] in DETERMINERS or task[k] in _MODIFIERS):
+                k -= 1
+            noun.landmark = k >= 0 and task[k] in _LOCATIVES | {"to"} and (task[k] != "to" or task[k - 1] in _LOCATIVES)
+            noun.destination = k >= 0 and task[k] in ("into", "onto")
+            noun.source = k >= 0 and (task[k] in ("from", "off") or (task[k] == "of" and task[k - 1 : k] == ["out"]))
         parse.obstacles = list(dict.fromkeys(parse.obstacles))
         return parse
 
+    # ---- step 0: positions and "one" ----------------------------------------------------------
+
+    def _resolve_one_anaphora(self, words: list[str], vocabulary: Sequence[str]) -> list[str]:
+        """ "two bowls, a red one and a blue one" -> "... a red bowl and a blue bowl": a modifier + "one"
+        takes the noun last said with that modifier, else the noun last said."""
+        words = list(words)
+        for i, word in enumerate(words):
+            if word not in ("one", "ones") or not i or words[i - 1] not in _MODIFIERS or words[i - 1] == "other":
+                continue
+            earlier = self._mentions(words[: i - 1], vocabulary)
+            if not earlier:
+                continue
+            modifier = words[i - 1]
+            group = COLOURS if modifier in COLOURS else SIZE_WORDS.keys() if modifier in SIZE_WORDS else POSITION_WORDS
+            same = [noun for noun, modifiers in earlier if modifier in modifiers]
+            alike = [noun for noun, modifiers in earlier if modifiers & group]  # "the red block ... the blue one"
+            words[i] = (same or alike or [earlier[-1][0]])[-1]
+        return words
+
+    def _mentions(self, words: Sequence[str], vocabulary: Sequence[str]) -> list[tuple[str, set[str]]]:
+        """(noun, modifiers said before it) for each object noun in `words`, in order."""
+        out, i = [], 0
+        while i < len(words):
+            match = self._vocabulary_match(list(words), i, vocabulary)
+            length = len(match.split()) if match else 1
+            if match is None:
+                previous = words[i - 1] if i else ""
+                word = words[i]
+                if not (
+                    (previous in DETERMINERS or previous in _MODIFIERS)
+                    and word.isalpha()
+                    and word not in _BOUNDARY | _NON_OBJECTS | DETERMINERS | _MODIFIERS.union(self._single_verbs)
+                ):
+                    i += 1
+                    continue
+                match = singular(word)
+            modifiers, j = set(), i - 1
+            while j >= 0 and words[j] in _MODIFIERS:
+                modifiers.add(words[j])
+                j -= 1
+            out.append((match, modifiers))
+            i += length
+        return out
+
     # ---- step 1: obstacles ------------------------------------------------------------------
 
-    def _obstacle_spans(self, words: list[str]) -> list[tuple[int, int]]:
-        """(start, end) token spans governed by obstacle cues."""
+    def _obstacle_spans(self, words: list[str]) -> list[tuple[int, int, str]]:
+        """(start, end, cue) token spans governed by obstacle cues."""
         spans, i = [], 0
         while i < len(words):
             cue = next((c for c in _CUES if self._cue_at(words, i, c)), None)
             if cue is None:
                 i += 1
                 continue
+            cue_words = words[i : i + len(cue)]
             start = i + len(cue)
-            while start < len(words) and words[start] in _PARTICLES:
-                start += 1
+            if cue[-1] == "<det>":
+                start -= 1  # the determiner belongs to the noun phrase ("not the mug")
+            while start < len(words) and (
+                words[start] in _PARTICLES or (words[start].endswith("ing") and _matches("<hit>", words[start]))
+            ):
+                start += 1  # "avoid knocking over the mug": the mug, not a "knocking mug"
             end = start
             while end < len(words) and not self._clause_ends(words, end):
                 end += 1
-            spans.append((start, end))
+            spans.append((start, end, " ".join(cue_words)))
             for j in range(i, start):
                 words[j] = ","  # the cue words are not task words
             i = end
@@ -244,81 +384,197 @@ class OfflineDecomposer:
         word = words[i]
         if word in _SENTENCE_END or word in _CLAUSE_ENDS:
             return True
-        if any(self._cue_at(words, i, c) for c in _CUES):
+        if any(self._cue_at(words, i, c) for c in _CUES if c[-1] != "<det>"):
+            return True
+        previous = words[i - 1] if i else ","
+        # ", which is next to it", ", it is right in front": a new clause about the object, not more objects
+        if previous == "," and (word in ("which", "who") or words[i + 1 : i + 2] and words[i + 1] in _COPULAS):
             return True
         # A lexicon verb right after "and" or a comma starts the next clause ("avoid the mug and pour ...").
-        previous = words[i - 1] if i else ","
-        return previous in ("and", ",") and bool(lemmas(word) & self._verbs.keys())
+        return previous in ("and", ",") and bool(lemmas(word) & self._single_verbs)
 
-    @staticmethod
-    def _in_the_way_spans(words: list[str]) -> list[tuple[int, int, int]]:
-        """(start, end, stop): the noun phrase words[start:end] before "in the way" ("there is a mug in
-        the way", "the mug is in the way"); words[start:stop] are not task words."""
+    def _predicate_spans(self, words: list[str]) -> list[tuple[int, int, int, int, str]]:
+        """(start, end, mask_start, mask_stop, predicate): obstacles declared by what is said of them,
+        the noun phrase words[start:end]; words[mask_start:mask_stop] are not task words."""
         spans = []
-        copulas = {"is", "are", "'s", "was", "were", "sits", "stands"}
-        stops = _SENTENCE_END | _CLAUSE_ENDS | copulas | {","}
-        for i in range(len(words) - 2):
-            if words[i : i + 3] == ["in", "the", "way"]:
-                end = i - 1 if i and words[i - 1] in copulas else i
-                start = end
-                while start > 0 and words[start - 1] not in stops:
-                    start -= 1
-                spans.append((start, end, i + 3))
+        for i in range(len(words)):
+            marker = next((m for m in _WAY_MARKERS if self._cue_at(words, i, m)), None)
+            if marker is not None:
+                stop = i + len(marker)
+                if marker[0] in ("blocking", "blocks", "obstructing", "obstructs"):
+                    # "blocking the way" (not "blocking the drawer": that drawer is still a task word)
+                    if words[stop : stop + 2] in (["the", "way"], ["the", "path"], ["my", "way"]):
+                        stop += 2
+                start, end = self._subject_before(words, i)
+                if start < end:
+                    spans.append((start, end, start, stop, " ".join(words[start:stop])))
+            elif words[i] in _OBSTACLE_NOUNS and self._obstacle_predicate(words, i):
+                spans.append(self._obstacle_predicate(words, i))
+            elif words[i] == "between":
+                # "there is a mug between the bowl and the pan", "the mug sits between them": on the path
+                start, end = self._subject_before(words, i)
+                there = start >= 2 and words[start - 1] in _COPULAS and words[start - 2] == "there"
+                if start < end and (words[i - 1] in _COPULAS or there):
+                    spans.append((start, end, start, i, " ".join(words[start:i])))
+            elif words[i] in _WARNINGS and words[i + 1 : i + 2] and words[i + 1] in {",", ":", "!", "-"}:
+                # "careful, the can is right beside the pan": what a warning is about is an obstacle
+                k = i + 2
+                while k < len(words) and words[k] not in _COPULAS and words[k] not in _SUBJECT_STOPS:
+                    k += 1
+                said = words[i + 2 : k]
+                if (
+                    said
+                    and k < len(words)
+                    and words[k] in _COPULAS
+                    and not any(self._is_verb(words, m) for m in range(i + 2, k))
+                ):
+                    spans.append((i + 2, k, i + 2, k, " ".join(words[i:k])))
+            elif words[i] == "alone" and "leave" in words[max(0, i - 8) : i]:
+                leave = max(k for k in range(max(0, i - 8), i) if words[k] == "leave")
+                spans.append((leave + 1, i, leave, i + 1, " ".join(words[leave : i + 1])))
         return spans
 
-    def _noun_phrase_list(self, words: Sequence[str]) -> list[ObjectRef]:
-        """Obstacle phrases from "the blue glass or the kettle, the can and the green box"."""
-        refs, chunk = [], []
-        for word in [*words, ","]:
+    def _obstacle_predicate(self, words: list[str], i: int) -> tuple[int, int, int, int, str] | None:
+        """ "the lamp counts as an obstacle", "treat the lamp as an obstacle", "obstacles: the mug and the
+        glass", "the obstacle is the lamp"; None for a plain noun ("avoid the obstacle")."""
+        j = i - 1
+        while j >= 0 and words[j] in _PREDICATE_FILLER:
+            j -= 1
+        said_of = {w for w in words[j + 1 : i]} & {"as", "is", "are", "'s", "counts", "count", "acts", "act"}
+        if said_of - {"is", "are", "'s"} or (said_of and words[j + 1 : i][-1:] not in (["the"],)):
+            start, end = self._subject_before(words, j + 1, plural=words[i].endswith("s"))
+            if start < end:
+                return start, end, start, i + 1, " ".join(words[start : i + 1])
+        k = i + 1
+        while k < len(words) and words[k] in (":", ",", "is", "are", "'s", "include", "includes"):
+            k += 1
+        # "the obstacle is the lamp", "obstacles: a mug"; not "the obstacle is next to the pan" (a place)
+        if k > i + 1 and k < len(words) and (words[k] not in _BOUNDARY or words[k] in DETERMINERS):
+            end = k
+            while end < len(words) and not self._clause_ends(words, end) and words[end] not in _COPULAS:
+                end += 1
+            return k, end, i, end, " ".join(words[i:end])
+        if i and words[i - 1] in DETERMINERS:
+            return i, i + 1, i, i + 1, " ".join(words[i - 1 : i + 1])  # the simulator's "obstacle" itself
+        return None
+
+    def _subject_before(self, words: list[str], i: int, plural: bool = False) -> tuple[int, int]:
+        """The noun phrase (or list, after a plural verb) that ends before words[i], skipping a copula."""
+        j = i
+        while j > 0 and words[j - 1] in _COPULAS | _STANCE | {"also", "still", "currently", "right", "now", "just"}:
+            plural |= words[j - 1] in _PLURAL_COPULAS
+            j -= 1
+        end = start = j
+        while start > 0 and words[start - 1] not in _SUBJECT_STOPS and not self._is_verb(words, start - 1):
+            if words[start - 1] in _LIST_SEPARATORS:
+                k = start - 1
+                while k > 0 and words[k - 1] not in _SUBJECT_STOPS and words[k - 1] not in _LIST_SEPARATORS:
+                    k -= 1
+                if any(self._is_verb(words, m) for m in range(k, start - 1)):
+                    break  # "open the drawer, the mug and the glass are in the way": a clause, not a list item
+                if not plural:
+                    # "there's a mug, a can and a ball in the way": the list follows "there is"
+                    k = start - 1
+                    while k > 0 and words[k - 1] not in _SUBJECT_STOPS:
+                        k -= 1
+                    plural = k >= 2 and words[k - 1] in _COPULAS and words[k - 2] == "there"
+                if not plural:
+                    break
+            start -= 1
+        if start > 0 and words[start - 1] in _PLURAL_COPULAS:
+            plural = True  # "there are a mug and a glass in the way"
+        while start < end and words[start] in _LIST_SEPARATORS:
+            start += 1
+        return start, end
+
+    def _is_verb(self, words: list[str], i: int) -> bool:
+        """A lexicon verb, not a noun after a determiner ("the base")."""
+        previous = words[i - 1] if i else ","
+        return bool(lemmas(words[i]) & self._single_verbs) and previous not in DETERMINERS | _MODIFIERS
+
+    def _read_declaration(self, words: list[str], start: int, end: int, cue: str, parse: Parse) -> None:
+        """Obstacles (or pending references) from an obstacle declaration's noun phrase list."""
+        chunk: list[str] = []
+        chunk_start = start
+        for k, word in enumerate([*words[start:end], ","]):
             if word in _LIST_SEPARATORS or word in _SENTENCE_END:
-                ref = self._chunk_to_ref(chunk)
-                if ref is not None:
-                    refs.append(ref)
-                chunk = []
+                self._read_chunk(chunk, chunk_start, cue, parse)
+                chunk, chunk_start = [], start + k + 1
             else:
                 chunk.append(word)
-        return refs
+
+    def _read_chunk(self, chunk: list[str], index: int, cue: str, parse: Parse) -> None:
+        content = tuple(w for w in chunk if w not in _POLITE or w in ("it", "one"))
+        bare = tuple(w for w in content if w not in ("very", "just", "also", "either", "any"))
+        while len(bare) > 1 and bare[-1] in ("over", "off", "down", "up", "away", "around"):
+            bare = bare[:-1]  # "don't knock it over"
+        if bare in _PRONOUNS:
+            parse.references.append(_Reference(index, _PRONOUNS[bare], f"{cue} {' '.join(bare)}".strip()))
+            return
+        ref = self._chunk_to_ref(chunk)
+        if ref is not None:
+            parse.obstacles.append(ref)
+            parse.declared.append((index, ref))
+            return
+        said = [w for w in chunk if w not in DETERMINERS and w not in _PARTICLES and w not in _POLITE]
+        if said:
+            parse.warnings.append(
+                f"'{cue} {' '.join(chunk)}' names no object the robot can see; no obstacle was added for it"
+            )
 
     @staticmethod
     def _chunk_to_ref(chunk: Sequence[str]) -> ObjectRef | None:
         """'the small red coffee mug next to it' -> ObjectRef(name='coffee mug', color='red', size='small')."""
-        color = size = None
+        color = size = position = None
         nouns: list[str] = []
         previous = ""
+        vague = False  # "the thing next to the pan": a head that names no object ends the phrase too
         for word in chunk:
             after_determiner = previous in DETERMINERS or previous in COLOURS or previous in SIZE_WORDS
             previous = word
             # A function word straight after "the" is a noun after all ("the can").
             if word in _BOUNDARY and not after_determiner:
-                if nouns:
+                if nouns or vague:
                     break
                 continue
             if word in DETERMINERS:
                 continue
-            if word in COLOURS:
+            if word in POSITION_WORDS and not nouns and (word != "middle" or after_determiner):
+                position = POSITION_WORDS[word]
+            elif word in COLOURS:
                 color = canonical_attribute(word)
             elif word in SIZE_WORDS:
                 size = canonical_attribute(word)
-            elif word not in _NON_OBJECTS:
+            elif word not in _NON_OBJECTS and not vague:
                 nouns.append(word)
+            elif word not in POSITION_WORDS:
+                vague = True  # "anything else": nothing after a vague head is its noun
         if not nouns:
             return None
         nouns[-1] = singular(nouns[-1])
-        return ObjectRef(name=" ".join(nouns), color=color, size=size)
+        return ObjectRef(name=" ".join(nouns), color=color, size=size, position=position)
 
     # ---- step 2: verbs and nouns ------------------------------------------------------------
 
     def _find_verbs(self, task: list[str], parse: Parse) -> set[int]:
         positions = set()
         for i, word in enumerate(task):
-            hits = lemmas(word) & self._verbs.keys()
+            hits = lemmas(word) & self._single_verbs
+            heads = {v for v in self._phrasal if v[0] in lemmas(word)}
+            if not hits and not heads:
+                continue
+            # A lexicon word right after a determiner or adjective is a noun ("the water", "the base").
+            previous = task[i - 1] if i else ","
+            if previous in DETERMINERS or previous in COLOURS or previous in POSITION_WORDS:
+                continue
             if hits:
-                # A lexicon word right after a determiner or adjective is a noun ("the water", "the base").
-                previous = task[i - 1] if i else ","
-                if previous in DETERMINERS or previous in COLOURS:
-                    continue
                 parse.verbs.append(sorted(hits)[0])
                 positions.add(i)
+            for verb in sorted(heads):
+                particle = self._particle_after(task, i, verb[1:])
+                if particle is not None:
+                    parse.verbs.append(" ".join(verb))
+                    positions.update({i, particle})
         content = [w for w in task if w not in _POLITE and w not in _SENTENCE_END and w != ","]
         head = []
         for word in content:
@@ -328,8 +584,17 @@ class OfflineDecomposer:
         parse.verb_phrase = " ".join(head[:3])
         return positions
 
-    def _find_nouns(self, task: list[str], verb_positions: set[int], scene_kinds: Sequence[str]) -> list[_Noun]:
-        vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
+    @staticmethod
+    def _particle_after(task: list[str], i: int, particle: tuple[str, ...]) -> int | None:
+        """Index of a phrasal verb's particle within its clause: "pull out the drawer", "pull the drawer out"."""
+        for k in range(i + 1, min(len(task), i + 8)):
+            if task[k] in _SENTENCE_END or task[k] in _CLAUSE_ENDS or task[k] == ",":
+                return None
+            if tuple(task[k : k + len(particle)]) == particle:
+                return k
+        return None
+
+    def _find_nouns(self, task: list[str], verb_positions: set[int], vocabulary: Sequence[str]) -> list[_Noun]:
         nouns: list[_Noun] = []
         used = set(verb_positions)
         i = 0
@@ -339,8 +604,8 @@ class OfflineDecomposer:
                 i += 1
                 continue
             end = i + len(match.split())
-            color, size = self._modifiers(task, i)
-            nouns.append(_Noun(match, color, size, known=True, position=i))
+            color, size, position = self._modifiers(task, i)
+            nouns.append(_Noun(match, color, size, known=True, index=i, position=position))
             used.update(range(i, end))
             i = end
         # Unknown head nouns after a determiner ("the stapler") fill wildcard slots.
@@ -349,16 +614,22 @@ class OfflineDecomposer:
                 continue
             chunk = []
             for j in range(i + 1, len(task)):
-                if task[j] in _BOUNDARY or task[j] in _SENTENCE_END or task[j] == "," or j in verb_positions:
+                # "a can", "the can": a function word straight after an article is the noun
+                noun_after_article = j == i + 1 and word in ("a", "an", "the") and task[j] == "can"
+                if task[j] in _SENTENCE_END or task[j] == "," or j in verb_positions:
+                    break
+                if task[j] in _BOUNDARY and not noun_after_article:
                     break
                 chunk.append(j)
             if chunk and not used & set(chunk):
-                ref = self._chunk_to_ref([task[j] for j in chunk])
+                ref = self._chunk_to_ref([word, *(task[j] for j in chunk)])
                 if ref is not None:
                     name = self._matcher_noun(ref.name, vocabulary) or ref.name
-                    nouns.append(_Noun(name, ref.color, ref.size, known=name != ref.name, position=chunk[0]))
+                    nouns.append(
+                        _Noun(name, ref.color, ref.size, known=name != ref.name, index=chunk[0], position=ref.position)
+                    )
                     used.update(chunk)
-        return sorted(nouns, key=lambda n: n.position)
+        return sorted(nouns, key=lambda n: n.index)
 
     @staticmethod
     def _vocabulary_match(task: list[str], i: int, vocabulary: Sequence[str]) -> str | None:
@@ -370,16 +641,19 @@ class OfflineDecomposer:
         return None
 
     @staticmethod
-    def _modifiers(task: list[str], i: int) -> tuple[str | None, str | None]:
-        color = size = None
+    def _modifiers(task: list[str], i: int) -> tuple[str | None, str | None, str | None]:
+        color = size = position = None
         j = i - 1
-        while j >= 0 and (task[j] in COLOURS or task[j] in SIZE_WORDS):
-            if task[j] in COLOURS:
+        while j >= 0 and task[j] in _MODIFIERS:
+            if task[j] in POSITION_WORDS:
+                if j and (task[j - 1] in DETERMINERS or task[j - 1] in _MODIFIERS):
+                    position = position or POSITION_WORDS[task[j]]  # "the top drawer", not "right the bottle"
+            elif task[j] in COLOURS:
                 color = color or canonical_attribute(task[j])
             else:
                 size = size or canonical_attribute(task[j])
             j -= 1
-        return color, size
+        return color, size, position
 
     def _matcher_noun(self, noun: str, vocabulary: Sequence[str]) -> str | None:
         if self.matcher is None or noun in _NON_OBJECTS:
@@ -391,11 +665,13 @@ class OfflineDecomposer:
 
     def _choose_skill(self, instruction: str, parse: Parse) -> SkillSpec:
         verb_skills = {name for verb in parse.verbs for name in self._verbs[verb]}
+        phrasal_skills = {name for verb in parse.verbs if " " in verb for name in self._verbs[verb]}
         if not verb_skills and self.matcher is not None and parse.verb_phrase:
             verb_skills = self._matcher_skills(parse.verb_phrase)
         evidence: dict[str, float] = {}
         for skill in self.registry:
             score = 2.0 if skill.name in verb_skills else 0.0
+            score += 0.5 if skill.name in phrasal_skills else 0.0  # "pull out" says more than "pull"
             assigned, unplaced = self._assign(skill, parse.nouns)
             score += sum(0.5 if wildcard else 1.0 for _, wildcard in assigned.values())
             score -= sum(1 for noun in unplaced if noun.known and not self._same_object(skill, noun, assigned))
@@ -417,6 +693,48 @@ class OfflineDecomposer:
             )
         return best
 
+    def _check_fit(self, instruction: str, skill: SkillSpec, parse: Parse) -> None:
+        """Refuse a reading that would silently drop or swap an object the user asked to act on: "pour the
+        plant into the pan" is not bowl_pour(bowl, pan), nor "sweep the bowl into the pan", nor "pour the pan
+        into the bowl", nor "put the microwave in the drawer"."""
+        assigned, free = self._assign(skill, parse.nouns)
+        slots = f"{skill.name} ({', '.join(skill.slot_words)})"
+        for noun in free:
+            if noun.known and noun.in_task and not noun.landmark and not self._same_object(skill, noun, assigned):
+                raise InstructionNotUnderstoodError(instruction, f"'{noun.name}' has no place in {slots}")
+        specific = [v for v in parse.verbs if v.split()[0] not in _GENERIC_VERBS]
+        if specific and not any(skill.name in self._verbs[v] for v in parse.verbs):
+            raise InstructionNotUnderstoodError(
+                instruction,
+                f"'{specific[0]}' is not how {skill.name} is asked for; known skills: {', '.join(self.registry.names)}",
+            )
+        fixtures = {
+            w
+            for s in self.registry
+            for slot in s.slots
+            if not slot.carried and not slot.accepts_any
+            for w in slot.synonyms
+        }
+        for noun, wildcard in assigned.values():
+            if wildcard and noun.name in fixtures:
+                raise InstructionNotUnderstoodError(instruction, f"'{noun.name}' cannot be carried by {skill.name}")
+        carried = skill.carried_slot
+        for k, (noun, _) in assigned.items():
+            if carried is not None and k != carried and noun.source:
+                raise InstructionNotUnderstoodError(
+                    instruction,
+                    f"it asks to take something out of or off the {noun.name}, but {skill.name} puts the "
+                    f"{skill.slots[carried].word} there",
+                )
+        if carried is not None and carried in assigned and assigned[carried][0].destination:
+            others = [n for k, (n, _) in assigned.items() if k != carried]
+            if others and not any(n.destination for n in others):
+                raise InstructionNotUnderstoodError(
+                    instruction,
+                    f"it asks to move things into the {assigned[carried][0].name}, but {skill.name} carries the "
+                    f"{skill.slots[carried].word} to the {', '.join(n.name for n in others)}",
+                )
+
     def _matcher_skills(self, verb_phrase: str) -> set[str]:
         verbs = list(self._verbs)
         index, similarity = self.matcher.best_match(verb_phrase, verbs)
@@ -426,7 +744,7 @@ class OfflineDecomposer:
     def _assign(skill: SkillSpec, nouns: list[_Noun]) -> tuple[dict[int, tuple[_Noun, bool]], list[_Noun]]:
         """Slot index -> (noun, filled as wildcard); and the nouns left over."""
         assigned: dict[int, tuple[_Noun, bool]] = {}
-        free = list(nouns)
+        free = sorted(nouns, key=lambda n: not n.in_task)  # "there are two bowls. pour the red one ..."
         for k, slot in enumerate(skill.slots):
             noun = next((n for n in free if _exact(slot, n.name)), None) or next(
                 (n for n in free if slot.matches(n.name)), None
@@ -450,14 +768,56 @@ class OfflineDecomposer:
         """A leftover noun that names an already filled slot again ("the bottle of wine")."""
         return any(skill.slots[k].matches(noun.name) for k in assigned)
 
-    def _resolve_pronoun_obstacles(self, skill: SkillSpec, parse: Parse) -> None:
-        """ "there's a vase nearby, avoid it": the object named last before the cue, if no slot took it."""
-        for cue in parse.pronoun_obstacles:
-            _, free = self._assign(skill, parse.nouns)
-            before = [n for n in free if n.position < cue]
-            if before:
-                parse.nouns.remove(before[-1])
-                parse.obstacles.append(before[-1].ref())
+    def _resolve_references(self, instruction: str, skill: SkillSpec, parse: Parse) -> None:
+        """ "there's a vase nearby, avoid it": a pronoun in an obstacle declaration means an object named
+        before it that is not a target. Several candidates: all are avoided and a warning says so; only
+        targets: no obstacle, a warning; nothing at all: a refusal, since the obstacle cannot be dropped."""
+        for reference in parse.references:
+            assigned, free = self._assign(skill, parse.nouns)
+            targets = [noun for noun, _ in assigned.values()]
+            before = [n for n in free if n.index < reference.index]
+            others = [n for n in before if not any(_same_thing(skill, n, t) for t in targets)]
+            if reference.kind == "other":
+                others = self._other_one(skill, reference, before, others, targets, parse)
+            declared_before = [k for k, _ in parse.declared if k < reference.index]
+            targets_before = [t.index for t in targets if t.index < reference.index]
+            if not others and declared_before and max(declared_before) > max(targets_before, default=-1):
+                continue  # "the plate is in the way, so go around it": an obstacle already
+            if not others:
+                named = [t for t in sorted(targets, key=lambda t: t.index) if t.index < reference.index]
+                if named:
+                    parse.warnings.append(
+                        f"'{reference.text}' can only mean a target ({', '.join(t.ref().phrase for t in named)}); "
+                        f"a target is never made an obstacle"
+                    )
+                    continue
+                raise UncertainObstacleError(
+                    instruction, f"'{reference.text}' refers to no object named before it; name the obstacle"
+                )
+            chosen = others
+            if reference.kind == "it" and len(others) > 1:
+                parse.warnings.append(
+                    f"'{reference.text}' may mean {' or '.join(n.ref().phrase for n in others)}; avoiding all of them"
+                )
+            for noun in chosen:
+                if noun in parse.nouns:
+                    parse.nouns.remove(noun)
+                parse.obstacles.append(noun.ref())
+
+    @staticmethod
+    def _other_one(skill, reference, before, others, targets, parse) -> list[_Noun]:
+        """ "the other one": an object of a target's kind that is not the target (named before, or implied)."""
+        named_before = [t for t in targets if t.index < reference.index] or targets
+        if not named_before:
+            return others
+        same_kind = [n for n in others if any(n.name == t.name for t in named_before)]
+        if same_kind:
+            return same_kind
+        contrasted = [t for t in named_before if t.color or t.size or t.position] or named_before
+        target = max(contrasted, key=lambda t: t.index)
+        if len({t.name for t in named_before}) > 1 and not (target.color or target.size or target.position):
+            parse.warnings.append(f"'{reference.text}' read as the other {target.name}")
+        return [_Noun(target.name, None, None, known=True, index=reference.index, position="other")]
 
     # ---- step 4: slots and scene ------------------------------------------------------------
 
@@ -472,6 +832,27 @@ class OfflineDecomposer:
             keep_own_name = wildcard or (slot.accepts_any and not _exact(slot, noun.name))
             targets.append(noun.ref(None if keep_own_name else slot.word))
         return targets
+
+    @staticmethod
+    def _drop_targets(skill: SkillSpec, targets: list[ObjectRef], parse: Parse) -> list[ObjectRef]:
+        """Obstacles without those that are a target ("pour the bowl into the pan, don't spill the bowl")."""
+        kept = []
+        for obstacle in parse.obstacles:
+            same = [
+                t
+                for slot, t in zip(skill.slots, targets, strict=True)
+                if (slot.matches(obstacle.name) and slot.matches(t.name) or obstacle.name == t.name)
+                and obstacle.position != "other"
+                and all(getattr(obstacle, a) in (None, getattr(t, a)) for a in ("color", "size", "position"))
+            ]
+            if same:
+                parse.warnings.append(
+                    f"'{obstacle.phrase}' is said to be avoided but is the target {same[0].phrase} of "
+                    f"{skill.name}; it is not made an obstacle"
+                )
+            else:
+                kept.append(obstacle)
+        return kept
 
     def _ground_in_scene(self, plan: TaskPlan, skill: SkillSpec, scene_objects: SceneObjects) -> TaskPlan:
         """Rename targets and obstacles to scene kinds where the words differ but mean the same."""
@@ -498,3 +879,56 @@ class OfflineDecomposer:
 
 def _exact(slot: Slot, noun: str) -> bool:
     return noun in slot.synonyms or singular(noun) in slot.synonyms
+
+
+def _same_thing(skill: SkillSpec, noun: _Noun, target: _Noun) -> bool:
+    """Whether a mention is (or may be) the target again: the same kind, no attribute that tells them apart."""
+    same_kind = noun.name == target.name or any(s.matches(noun.name) and s.matches(target.name) for s in skill.slots)
+    if not same_kind or noun.position == "other":
+        return False
+    return all(
+        getattr(noun, a) is None or getattr(target, a) is None or getattr(noun, a) == getattr(target, a)
+        for a in ("color", "size", "position")
+    )
+
+
+_POST_POSITIONS = {
+    ("on", "the", "left"): "left", ("on", "the", "right"): "right", ("to", "the", "left"): "left",
+    ("to", "the", "right"): "right", ("on", "your", "left"): "left", ("on", "your", "right"): "right",
+    ("to", "your", "left"): "left", ("to", "your", "right"): "right", ("at", "the", "top"): "top",
+    ("at", "the", "bottom"): "bottom", ("on", "top"): "top", ("at", "the", "back"): "back",
+    ("at", "the", "front"): "front", ("in", "front"): "front", ("in", "the", "back"): "back",
+    ("in", "the", "front"): "front", ("on", "the", "bottom"): "bottom", ("in", "the", "middle"): "middle",
+    ("in", "the", "centre"): "centre", ("in", "the", "center"): "center", ("nearest",): "nearest",
+    ("closest",): "closest", ("farthest",): "farthest", ("furthest",): "furthest",
+}  # fmt: skip
+
+
+def _front_positions(words: list[str]) -> list[str]:
+    """ "the bowl on the left" -> "the left bowl", "the mug closest to you" -> "the nearest mug": a position
+    said after the noun moves in front of it, where colours and sizes are read."""
+    out = list(words)
+    i = 1
+    while i < len(out):
+        post = next((p for p in _POST_POSITIONS if tuple(out[i : i + len(p)]) == p), None)
+        previous = out[i - 1]
+        if post is None or previous in _BOUNDARY or previous in DETERMINERS or previous in _MODIFIERS:
+            i += 1
+            continue
+        if out[i + len(post) : i + len(post) + 1] == ["of"]:
+            i += 1  # "on top of the drawer", "in front of it": a place relative to another object
+            continue
+        start = i - 1
+        while start > 0 and out[start - 1] not in DETERMINERS and out[start - 1] not in _BOUNDARY | _SENTENCE_END:
+            start -= 1
+        if start == 0 or out[start - 1] not in DETERMINERS:
+            i += 1
+            continue
+        stop = i + len(post)
+        if post in (("nearest",), ("closest",), ("farthest",), ("furthest",)) and out[stop : stop + 1] == ["to"]:
+            stop += 1  # "closest to you / to the robot": the reference point is dropped with it
+            while stop < len(out) and out[stop] in ("you", "me", "the", "robot", "us", "gripper", "arm"):
+                stop += 1
+        out[start:stop] = [_POST_POSITIONS[post], *out[start:i]]
+        i = stop
+    return out

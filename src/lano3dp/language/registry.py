@@ -62,7 +62,8 @@ class SkillSpec(BaseModel):
     Attributes:
         name: registry key, also the simulator task name.
         description: one sentence, shown to the LLM.
-        verbs: verb lemmas (or short verb phrases) that ask for this skill.
+        verbs: verb lemmas that ask for this skill, and phrasal verbs as "verb particle" ("pull out",
+            "set upright"); the particle may come after the object ("pull the drawer out").
         slots: the ordered objects the policy observes.
         checkpoint: optional path to the trained policy folder.
     """
@@ -187,11 +188,20 @@ def describe_scene(scene_objects: SceneObjects) -> list[str]:
     return out
 
 
+def _verbs(text: str) -> tuple[str, ...]:
+    """ "pour, tip into" -> ("pour", "tip into"): verbs and phrasal verbs, comma-separated."""
+    return tuple(v.strip() for v in text.split(","))
+
+
 def _slot(word: str, *synonyms: str, accepts_any: bool = False, carried: bool = False) -> Slot:
     return Slot(word=word, synonyms=synonyms, accepts_any=accepts_any, carried=carried)
 
 
 _DRAWER = _slot("drawer")
+_INTO_DRAWER_VERBS = _verbs(
+    "put, place, store, stow, insert, drop, move, tuck, set, stash, pack, slip, slide, put away, put in, drop in, "
+    "tuck away, stow away"
+)
 _CARRIED_BOTTLE = _slot("bottle", "flask", carried=True)
 
 
@@ -202,7 +212,10 @@ def default_registry() -> SkillRegistry:
             SkillSpec(
                 name="bowl_pour",
                 description="grasp the bowl and pour its contents into the pan",
-                verbs=("pour", "empty", "dump", "tip", "decant", "tilt", "fill", "transfer", "spill"),
+                verbs=_verbs(
+                    "pour, empty, dump, tip, decant, tilt, fill, transfer, spill, drain, tip into, tip out, "
+                    "pour out, empty out, tip over"
+                ),
                 slots=(
                     _slot("bowl", "dish", "basin", carried=True),
                     _slot("pan", "frying pan", "skillet", "pot", "saucepan", "wok"),
@@ -211,31 +224,38 @@ def default_registry() -> SkillRegistry:
             SkillSpec(
                 name="bottle_upright",
                 description="stand a bottle that lies on its side upright",
-                verbs=("stand", "upright", "right", "erect", "raise"),
+                verbs=_verbs(
+                    "stand, upright, right, erect, raise, straighten, stand up, set upright, put upright, "
+                    "turn upright, flip upright, prop up, tip up"
+                ),
                 slots=(_CARRIED_BOTTLE,),
             ),
             SkillSpec(
                 name="bottle_in_drawer",
                 description="put the bottle into the open drawer",
-                verbs=("put", "place", "store", "stow", "insert", "drop", "move", "tuck", "set"),
+                verbs=_INTO_DRAWER_VERBS,
                 slots=(_CARRIED_BOTTLE, _DRAWER),
             ),
             SkillSpec(
                 name="open_drawer",
                 description="pull the drawer open",
-                verbs=("open", "pull"),
+                verbs=_verbs(
+                    "open, pull, slide, yank, tug, pull out, pull open, slide out, slide open, yank open, draw out"
+                ),
                 slots=(_DRAWER,),
             ),
             SkillSpec(
                 name="close_microwave",
                 description="push the microwave door closed",
-                verbs=("close", "shut", "slam"),
+                verbs=_verbs("close, shut, slam, push shut, push closed, swing shut, swing closed, push to"),
                 slots=(_slot("microwave", "microwave oven", "oven"),),
             ),
             SkillSpec(
                 name="phone_on_base",
                 description="put the phone onto its charging base",
-                verbs=("put", "place", "dock", "return", "charge", "set", "rest", "hang"),
+                verbs=_verbs(
+                    "put, place, dock, return, charge, set, rest, hang, replace, hang up, put back, set back, plug in"
+                ),
                 slots=(
                     _slot(
                         "phone",
@@ -254,19 +274,19 @@ def default_registry() -> SkillRegistry:
             SkillSpec(
                 name="put_item_in_drawer",
                 description="put a small item (a block by default) into the open drawer",
-                verbs=("put", "place", "store", "stow", "insert", "drop", "move", "tuck", "set"),
+                verbs=_INTO_DRAWER_VERBS,
                 slots=(_slot("block", "item", "object", "toy", accepts_any=True, carried=True), _DRAWER),
             ),
             SkillSpec(
                 name="sweep_to_dustpan",
                 description="sweep the dirt into the dustpan with the broom",
-                verbs=("sweep", "brush"),
+                verbs=_verbs("sweep, brush, sweep up, brush up"),
                 slots=(_slot("broom", "brush", carried=True), _slot("dustpan", "dust pan")),
             ),
             SkillSpec(
                 name="water_plants",
                 description="pour water on the plant with the watering can",
-                verbs=("water", "irrigate", "sprinkle"),
+                verbs=_verbs("water, irrigate, sprinkle, give water, pour water"),
                 slots=(
                     _slot("watering can", "sprinkler", "watering jug", carried=True),
                     _slot("plant", "flower", "houseplant"),
@@ -275,7 +295,10 @@ def default_registry() -> SkillRegistry:
             SkillSpec(
                 name="open_wine_bottle",
                 description="take the cork or cap off the wine bottle",
-                verbs=("open", "uncork", "uncap", "unscrew", "pop", "decork"),
+                verbs=_verbs(
+                    "open, uncork, uncap, unscrew, pop, decork, remove, pop open, twist off, twist open, pull out, "
+                    "take off, pull off"
+                ),
                 slots=(_slot("bottle", "wine bottle", "wine"),),
             ),
         ]

@@ -509,6 +509,8 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
     decomposer = OfflineDecomposer(registry)
     plan = decomposer.decompose(config.instruction)
     log(f"plan: {plan.summary()}")
+    for warning in plan.warnings:  # what the parser was unsure of: the user should see it before the robot moves
+        log(f"warning: {warning}")
     checkpoint = config.checkpoint or (registry.get(plan.skill).checkpoint if plan.skill in registry else None)
     if checkpoint is None:
         if plan.skill not in packaged_checkpoints():

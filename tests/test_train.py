@@ -72,7 +72,7 @@ def test_train_config_round_trips_through_json(reach_data, tmp_path):
 def test_default_policy_config_takes_slots_and_points_from_the_dataset(reach_data):
     config = policy_config_for_dataset(reach_data)
     assert config.object_names == ("marker",) and config.n_points == 16
-    assert config.extra == {"skill": "reach_marker"}
+    assert config.extra == {"skill": "reach_marker", "observation": {}}
 
 
 # ---- a run ---------------------------------------------------------------------------------

@@ -48,7 +48,7 @@ def test_failed_expert_episodes_are_never_stored(tmp_path):
     # 5 steps are far too few for the expert: every seed fails, nothing is written.
     with pytest.raises(CollectionError, match=f"failed on {MAX_TRIES} seeds"):
         collect("bottle_upright", 1, out, image_size=32, n_points=32, progress=False, max_steps=5)
-    assert EpisodeStore.open(out).n_episodes == 0
+    assert not out.exists()  # a first collection that stored nothing leaves no store to block the re-run
 
 
 def test_similar_scenes_record_the_colour_named_target(tmp_path):

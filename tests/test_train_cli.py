@@ -23,7 +23,7 @@ def test_train_command_trains_a_loadable_policy(tmp_path):
     assert result.exit_code == 0, result.output
     assert "step_0000002" in result.output
     policy = DiffusionPolicy.from_pretrained(tmp_path / "run")
-    assert policy.config.point_encoder == "mlp" and policy.config.down_dims == (64, 128, 256)
+    assert policy.config.point_encoder == "mlp" and policy.config.down_dims == (48, 96, 192)
     assert policy.config.object_names == ("marker",) and policy.config.horizon == 8
     saved = json.loads((tmp_path / "run" / "train_config.json").read_text())
     assert saved["seed"] == 3 and saved["steps"] == 2

@@ -345,46 +345,171 @@ def summarize(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
+# Fields that change how an evaluation runs, not what it measures: every episode is seeded by itself.
+EVAL_FIELDS_NOT_MEASURED = ("workers",)
+EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
+
+
+def episode_log_path(out: str | Path) -> Path:
+    """The JSONL log beside a results JSON: results.json -> results.episodes.jsonl."""
+    out = Path(out)
+    return out.with_name((out.stem if out.suffix == ".json" else out.name) + ".episodes.jsonl")
+
+
+class EpisodeLog:
+    """Finished episodes of one evaluation, one JSON line each, appended (and fsync'ed) as they finish.
+
+    The first line says which evaluation the log belongs to (its EvalConfig up to the worker count, and
+    the checkpoint's weights); a log of another evaluation is started afresh. A last line cut short by a
+    kill is dropped; every complete line is an episode that is not run again.
+    """
+
+    def __init__(self, path: str | Path, identity: dict[str, Any]):
+        self.path = Path(path)
+        self.identity = identity
+        self.records: dict[int, dict[str, Any]] = {}
+        self._load()
+
+    def _load(self) -> None:
+        from lano3dp.errors import CorruptFileError
+
+        if not self.path.exists():
+            self._start()
+            return
+        raw = self.path.read_bytes()
+        lines = raw.split(b"\n")
+        complete, tail = lines[:-1], lines[-1]  # `tail` is what a kill mid-line left (b"" when none)
+        try:
+            header = json.loads(complete[0]) if complete else None
+        except ValueError:
+            header = None
+        if not header or header.get("format") != EPISODE_LOG_FORMAT or header.get("evaluation") != self.identity:
+            self._start()  # another evaluation's log (or an empty one): this evaluation starts from nothing
+            return
+        for number, line in enumerate(complete[1:], 2):
+            try:
+                entry = json.loads(line)
+                self.records[int(entry["index"])] = entry["episode"]
+            except (ValueError, KeyError, TypeError) as error:
+                raise CorruptFileError(self.path, f"line {number} is not an episode record ({error}); delete the "
+                                                  "file to evaluate every episode again") from error
+        if tail:
+            with open(self.path, "r+b") as handle:
+                handle.truncate(len(raw) - len(tail))
+
+    def _start(self) -> None:
+        header = {"format": EPISODE_LOG_FORMAT, "evaluation": self.identity}
+        temporary = self.path.with_name(self.path.name + ".tmp")
+        temporary.write_text(json.dumps(header) + "\n")
+        os.replace(temporary, self.path)
+        self.records = {}
+
+    def append(self, index: int, record: dict[str, Any]) -> dict[str, Any]:
+        """Write one finished episode; returns it as read back (JSON types), as every summary sees it."""
+        record = json.loads(json.dumps(_jsonable(record)))
+        with open(self.path, "a") as handle:
+            handle.write(json.dumps({"index": index, "episode": record}) + "\n")
+            handle.flush()
+            os.fsync(handle.fileno())
+        self.records[index] = record
+        return record
+
+
+def evaluation_identity(config: EvalConfig, checkpoint: Path) -> dict[str, Any]:
+    """What makes two evaluations the same: the config up to the worker count, and the exact weights."""
+    from safetensors import safe_open
+
+    from lano3dp.policy.modeling import CHECKSUM_KEY, WEIGHTS_NAME
+
+    wanted = json.loads(json.dumps(_jsonable(asdict(config))))
+    for name in EVAL_FIELDS_NOT_MEASURED:
+        wanted.pop(name, None)
+    weights = checkpoint / WEIGHTS_NAME
+    try:
+        with safe_open(str(weights), framework="pt") as handle:
+            checksum = (handle.metadata() or {}).get(CHECKSUM_KEY)
+    except Exception:  # loading the policy reports the damage
+        checksum = None
+    if checksum is None:
+        stat = weights.stat()
+        checksum = f"size={stat.st_size},mtime_ns={stat.st_mtime_ns}"
+    return {"config": wanted, "checkpoint": str(checkpoint), "weights": checksum}
+
+
 def evaluate(config: EvalConfig, progress: Callable[[int, int, dict], None] | None = None,
              command: str | None = None) -> dict[str, Any]:
     """Run every episode and return (and, with `config.out`, write) the results dict.
 
+    With `config.out`, each finished episode is appended to `episode_log_path(config.out)` as it
+    finishes, an evaluation killed part-way resumes from that log (its episodes are not run again),
+    and the summary is made from the log. The output is locked: a second evaluation writing the same
+    file is refused.
+
     Args:
-        progress: called after each finished episode with (done, total, record).
+        progress: called after each finished episode with (done, total, record); resumed episodes first.
         command: the command line to record (default: this process's argv).
     """
+    from lano3dp.locking import WriteLock, prepare_parent
+
+    lock = None
+    if config.out:
+        prepare_parent(config.out)  # a bad --out fails here, before the first episode
+        lock = WriteLock(config.out).acquire()
+    try:
+        return _evaluate(config, progress, command)
+    finally:
+        if lock is not None:
+            lock.release()
+
+
+def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
     from lano3dp.data.store import library_versions
     from lano3dp.policy.modeling import load_config, resolve_checkpoint
 
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
     checkpoint = resolve_checkpoint(config.checkpoint)
+    if Path(config.out or "").is_dir():
+        raise IsADirectoryError(f"--out {config.out} is a folder; give the results JSON file to write")
+    log = EpisodeLog(episode_log_path(config.out), evaluation_identity(config, checkpoint)) if config.out else None
+    records: dict[int, dict[str, Any]] = dict(log.records) if log else {}
     seeds = [config.seed + i for i in range(config.episodes)]
+    records = {index: record for index, record in records.items() if index < len(seeds)}
+    resumed = len(records)
     jobs = []
     for index, seed in enumerate(seeds):
         video = None
         if config.video_dir and index < config.n_videos:
             video = str(Path(config.video_dir) / f"episode_{seed}.mp4")
-        jobs.append((index, seed, video))
-    records: list[dict[str, Any] | None] = [None] * len(jobs)
-    workers = min(config.workers, len(jobs))
-    if workers == 1:
+        if index not in records:
+            jobs.append((index, seed, video))
+    done = 0
+    for index in sorted(records):
+        done += 1
+        if progress:
+            progress(done, len(seeds), records[index])
+
+    def finished(index: int, record: dict[str, Any]) -> None:
+        nonlocal done
+        records[index] = log.append(index, record) if log else record
+        done += 1
+        if progress:
+            progress(done, len(seeds), records[index])
+
+    workers = max(1, min(config.workers, len(jobs)))
+    if jobs and workers == 1:
         runner = EpisodeRunner(config)
         try:
-            for done, (index, seed, video) in enumerate(jobs, 1):
-                records[index] = runner.run(seed, video)
-                if progress:
-                    progress(done, len(jobs), records[index])
+            for index, seed, video in jobs:
+                finished(index, runner.run(seed, video))
         finally:
             runner.close()
-    else:
+    elif jobs:
         context = mp.get_context("spawn")
         with context.Pool(workers, initializer=_worker_init, initargs=(asdict(config),)) as pool:
-            for done, (index, record) in enumerate(pool.imap_unordered(_worker_run, jobs), 1):
-                records[index] = record
-                if progress:
-                    progress(done, len(jobs), record)
-    episodes = [r for r in records if r is not None]
+            for index, record in pool.imap_unordered(_worker_run, jobs):
+                finished(index, record)
+    episodes = [records[index] for index in sorted(records)]
     summary = summarize(episodes)
     result = {
         "command": command if command is not None else shlex.join(["lano3dp", *sys.argv[1:]]),
@@ -394,7 +519,7 @@ def evaluate(config: EvalConfig, progress: Callable[[int, int, dict], None] | No
         "summary": summary,
         "episodes": episodes,
         "timing": {"started_utc": started_at, "wall_s": round(time.perf_counter() - started, 2),
-                   "workers": workers, "cpu_count": os.cpu_count()},
+                   "workers": workers, "cpu_count": os.cpu_count(), "resumed_episodes": resumed},
         "versions": library_versions(),
     }
     if config.out:
@@ -494,7 +619,15 @@ def ground_obstacles(frame, phrases: Sequence[str]) -> tuple[list[str], list[str
 
 def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
                     command: str | None = None) -> dict[str, Any]:
-    """Plan, perceive, act: one episode for one instruction. Writes run.json, video.mp4 and top_view.png."""
+    """Plan, perceive, act: one episode for one instruction. Writes run.json, video.mp4 and top_view.png
+    into `config.out`, which is locked while it runs (a second run into the same folder is refused)."""
+    from lano3dp.locking import WriteLock
+
+    with WriteLock(config.out):
+        return _run_instruction(config, log, command)
+
+
+def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str | None) -> dict[str, Any]:
     from lano3dp.language import OfflineDecomposer, SkillRegistry, UnknownObjectError, default_registry
     from lano3dp.perception import ObjectObserver, SimOracleSegmenter
     from lano3dp.policy import DiffusionPolicy

@@ -152,12 +152,10 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
 
 
 # ---- evaluate --------------------------------------------------------------------------------------
-# Fields that change how an evaluation runs, not what it measures: every episode is seeded by itself.
-_EVAL_FIELDS_NOT_MEASURED = ("workers",)
-
-
 def cached_eval(config) -> dict[str, Any] | None:
     """The results in `config.out` if they were made with this EvalConfig (up to the worker count), else None."""
+    from lano3dp.evaluate import EVAL_FIELDS_NOT_MEASURED as _EVAL_FIELDS_NOT_MEASURED
+
     if config.out and Path(config.out).exists():
         previous = json.loads(Path(config.out).read_text())
         wanted = json.loads(json.dumps(asdict(config)))

@@ -35,7 +35,8 @@ import torch
 
 from lano3dp.augment import AugmentConfig, augment_batch
 from lano3dp.data import EpisodeStore, SequenceDataset, split_episodes
-from lano3dp.errors import Lano3dpError
+from lano3dp.errors import CorruptFileError, Lano3dpError
+from lano3dp.locking import WriteLock
 from lano3dp.policy import DiffusionPolicy, PolicyConfig
 from lano3dp.policy.checkpoint import (
     EMA,
@@ -54,6 +55,26 @@ from lano3dp.policy.modeling import load_config
 
 class TrainingConfigError(Lano3dpError, ValueError):
     """The training configuration does not fit the dataset or the run folder."""
+
+
+class NonFiniteLossError(Lano3dpError, FloatingPointError):
+    """The training or validation loss became NaN or infinite."""
+
+
+# TrainConfig fields a resumed run must keep: its optimizer, LR schedule, EMA, data split and noise streams
+# were made with them, and the optimizer state restores the old lr silently. `steps` may change (a run is
+# extended, the cosine decay re-planned from there) and the change is recorded in train_config.json
+# extra["resume_changes"]; the others (logging, checkpoint cadence, workers, threads, device, the CPU budget)
+# may change freely between sessions.
+RESUME_APPLIED_FIELDS = ("steps",)
+RESUME_FIXED_FIELDS = ("data", "batch_size", "lr", "weight_decay", "betas", "warmup_steps", "ema",
+                       "ema_inv_gamma", "ema_power", "ema_max", "val_ratio", "seed", "bf16", "augment")
+
+
+def changed_fields(old: dict[str, Any], new: dict[str, Any], names=None) -> list[str]:
+    """'name: old -> new' for each differing field (of `names`, default all)."""
+    names = sorted(set(old) | set(new)) if names is None else names
+    return [f"{name}: {old.get(name)!r} -> {new.get(name)!r}" for name in names if old.get(name) != new.get(name)]
 
 
 @dataclass
@@ -177,6 +198,13 @@ def policy_config_for_dataset(data: str | Path, **overrides) -> PolicyConfig:
     return PolicyConfig(**(fields | overrides))
 
 
+def load_training_state_step(checkpoint: Path) -> int | str:
+    try:
+        return int(json.loads((checkpoint / "progress.json").read_text())["step"])
+    except (OSError, ValueError, KeyError):
+        return checkpoint.name
+
+
 def _step_shapes(store: EpisodeStore) -> dict[str, tuple[int, ...]]:
     """Per-step shape of every key, from the first episode."""
     if store.n_episodes == 0:
@@ -204,6 +232,23 @@ class Trainer:
             torch.set_num_threads(config.threads)
         self.out = Path(config.out)
         self.checkpoints = self.out / "checkpoints"
+        # One writer per run folder (rank 0 writes for all ranks): a second `train` into it is refused.
+        self.lock = WriteLock(self.out) if self.is_main else None
+        if self.lock is not None:
+            self.lock.acquire()
+        try:
+            self._setup()
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        """Release the run folder (run() does it when it returns)."""
+        if self.lock is not None:
+            self.lock.release()
+
+    def _setup(self) -> None:
+        config = self.config
         if self.is_main:
             self.checkpoints.mkdir(parents=True, exist_ok=True)
             remove_stale_temporaries(self.checkpoints)
@@ -212,6 +257,8 @@ class Trainer:
         self.resumed_from: Path | None = resume_from
         state = load_training_state(resume_from) if resume_from is not None else None
         policy_config = self._policy_config(resume_from)
+        if resume_from is not None:
+            self._check_resume_settings(resume_from)
 
         store = EpisodeStore.open(config.data)
         self.subsample_points: int | None = None
@@ -276,11 +323,40 @@ class Trainer:
         if resume_from is not None:
             saved = load_config(resume_from / "config.json")
             if requested is not None and requested != saved:
+                differences = changed_fields(saved.to_dict(), requested.to_dict())
                 raise TrainingConfigError(
-                    f"{self.out} holds a run with another policy configuration ({resume_from / 'config.json'}); "
-                    "resume it with the same settings or train into a new --out folder")
+                    f"{self.out} holds a run with another policy configuration ({resume_from / 'config.json'}): "
+                    f"{'; '.join(differences)}; resume it with the same settings or train into a new --out folder")
             return saved
         return requested if requested is not None else policy_config_for_dataset(self.config.data)
+
+    def _check_resume_settings(self, resume_from: Path) -> None:
+        """Refuse to resume with another optimizer, schedule, data or seed, naming each changed field."""
+        saved_path = resume_from / "train_config.json"
+        if not saved_path.exists():  # checkpoints written before they carried their TrainConfig
+            return
+        try:
+            saved = json.loads(saved_path.read_text())
+        except (ValueError, UnicodeDecodeError) as error:
+            raise CorruptFileError(saved_path, f"not valid JSON ({error})") from error
+        new = self.config.to_dict()
+        for config in (saved, new):  # the same dataset under another spelling of its path is the same dataset
+            if config.get("data"):
+                config["data"] = str(Path(config["data"]).resolve())
+            if isinstance(config.get("betas"), tuple | list):
+                config["betas"] = [float(b) for b in config["betas"]]
+        step = load_training_state_step(resume_from)
+        differences = changed_fields(saved, new, RESUME_FIXED_FIELDS)
+        if differences:
+            raise TrainingConfigError(
+                f"{self.out} was trained to step {step} with other settings than this resume asks for "
+                f"({'; '.join(differences)}); resume with the old values or train into a new --out folder")
+        changes = list((saved.get("extra") or {}).get("resume_changes", []))
+        for name in RESUME_APPLIED_FIELDS:
+            if saved.get(name) != new.get(name):
+                changes.append({"at_step": step, "field": name, "old": saved.get(name), "new": new.get(name)})
+        if changes:
+            self.config.extra = {**self.config.extra, "resume_changes": changes}
 
     def _check_dataset(self, store: EpisodeStore, policy_config: PolicyConfig) -> None:
         missing = [key for key in (*policy_config.obs_keys, "action") if key not in store.keys]
@@ -323,16 +399,12 @@ class Trainer:
 
     @staticmethod
     def _load_weights(module: torch.nn.Module, weights: dict, path: Path) -> None:
-        from lano3dp.errors import CorruptFileError
-
         try:
             module.load_state_dict(weights, strict=True)
         except RuntimeError as error:
             raise CorruptFileError(path, f"weights do not match the policy configuration: {error}") from error
 
     def _restore(self, state: TrainingState, path: Path) -> None:
-        from lano3dp.errors import CorruptFileError
-
         try:
             self.optimizer.load_state_dict(state.optimizer)
             self.lr_scheduler.load_state_dict(state.lr_scheduler)
@@ -364,6 +436,12 @@ class Trainer:
 
     def run(self) -> Path:
         """Train up to config.steps; returns the final checkpoint folder (a DiffusionPolicy checkpoint)."""
+        try:
+            return self._run()
+        finally:
+            self.close()
+
+    def _run(self) -> Path:
         config = self.config
         writer = self._writer()
         progress = self._progress()
@@ -396,7 +474,8 @@ class Trainer:
                     last_step = self._finished()
                     value = float(loss.detach())
                     if not math.isfinite(value):
-                        raise FloatingPointError(f"training loss became {value} at step {self.step}")
+                        raise NonFiniteLossError(f"training loss became {value} at step {self.step}; lower --lr "
+                                                 "or check the dataset")
                     if self.is_main:
                         progress.update(1)
                         if self.step % config.log_every == 0 or self.step == config.steps:
@@ -458,7 +537,10 @@ class Trainer:
             losses.append(float(policy.compute_loss(batch, generator=generator)))
             weights.append(len(batches[index]))
         policy.train(was_training)
-        return float(np.average(losses, weights=weights))
+        value = float(np.average(losses, weights=weights))
+        if not math.isfinite(value):
+            raise NonFiniteLossError(f"validation loss became {value} at step {self.step}")
+        return value
 
     def save_checkpoint(self) -> Path:
         """Write checkpoints/step_XXXXXXX atomically and point checkpoints/last at it (rank 0 only)."""

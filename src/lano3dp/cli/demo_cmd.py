@@ -35,7 +35,7 @@ def demo_command(
     minutes: float = typer.Option(10.0, help="Training budget in CPU-minutes of this process (a busy machine "
                                             "stretches the wall time, not the training; a short timing probe "
                                             "sizes the LR schedule)."),
-    steps: int = typer.Option(None, help="Train exactly this many steps instead of a time budget."),
+    steps: int = typer.Option(None, min=1, help="Train exactly this many steps instead of a time budget."),
     episodes: int = typer.Option(10, min=1, help="Evaluation episodes per condition."),
     rho: float = typer.Option(DEFAULT_RHO, help="Guidance scale rho (metres per guided step: isotropic push)."),
     last_steps: int = typer.Option(DEFAULT_LAST_STEPS, help="Guide while the training-scale step k <= S (100: all)."),
@@ -48,17 +48,17 @@ def demo_command(
     """Collect, train, evaluate with and without a novel obstacle and guidance, and write a report."""
     from rich.console import Console
 
+    from lano3dp.cli import _options
     from lano3dp.cli.eval_cmd import command_line
-    from lano3dp.errors import Lano3dpError
 
+    _options.task_name(task)
+    _options.output_path(out, folder=True)
+    if minutes <= 0:
+        raise typer.BadParameter(f"must be > 0, got {minutes}", param_hint="--minutes")
     console = Console()
-    try:
-        report = run_demo(command=command_line(ctx), out=out, task=task, demos=demos, minutes=minutes, steps=steps,
-                          episodes=episodes, rho=rho, last_steps=last_steps, points=points, workers=workers, seed=seed,
-                          console=console)
-    except Lano3dpError as error:
-        console.print(f"[red]error:[/red] {error}")
-        raise typer.Exit(1) from error
+    report = run_demo(command=command_line(ctx), out=out, task=task, demos=demos, minutes=minutes, steps=steps,
+                      episodes=episodes, rho=rho, last_steps=last_steps, points=points, workers=workers, seed=seed,
+                      console=console)
     console.print(f"[bold green]report:[/bold green] {report}")
 
 
@@ -94,8 +94,16 @@ CONDITIONS = (
 )
 
 
-def run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, steps: int | None, episodes: int,
-             rho: float, last_steps: int, points: int, workers: int, seed: int, console) -> Path:
+def run_demo(*, out: Path, **options) -> Path:
+    """The demo into `out`, which is locked: a second demo into the same folder is refused."""
+    from lano3dp.locking import WriteLock
+
+    with WriteLock(out):
+        return _run_demo(out=out, **options)
+
+
+def _run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, steps: int | None, episodes: int,
+              rho: float, last_steps: int, points: int, workers: int, seed: int, console) -> Path:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from lano3dp.evaluate import EvalConfig, write_json

@@ -34,35 +34,39 @@ def eval_command(
     densify: int = typer.Option(DEFAULT_DENSIFY, min=1, help="Points per path segment the cost sees (1: waypoints "
                                                             "only, as the paper)."),
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
-    steps: int = typer.Option(None, help="Denoising steps (default: the policy's)."),
+    steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
     checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
     margin: float = typer.Option(0.02, help="Safety margin (m) beyond contact, part of Q*."),
     held_radius: float = typer.Option(None, help="Held-object extent (m) in Q*; default: measured from its cloud."),
-    max_steps: int = typer.Option(None, help="Episode step limit (default: the task's)."),
+    max_steps: int = typer.Option(None, min=1, help="Episode step limit (default: the task's)."),
     workers: int = typer.Option(1, min=1, help="Parallel episode processes (1 torch thread each)."),
     video_dir: Path = typer.Option(None, help="Write MP4s of the first --n-videos episodes here."),
-    n_videos: int = typer.Option(2, help="How many episodes get a video."),
+    n_videos: int = typer.Option(2, min=0, help="How many episodes get a video."),
     seed: int = typer.Option(1_000_000, help="First episode seed (apart from the demonstration seeds)."),
-    out: Path = typer.Option(Path("results.json"), help="Results JSON."),
+    out: Path = typer.Option(Path("results.json"), help="Results JSON; each finished episode is also appended to "
+                                                        "<out>.episodes.jsonl, from which a killed eval resumes."),
 ) -> None:
     """Evaluate a policy: success, obstacle contacts, minimum clearance, path length and latency per chunk."""
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from lano3dp.errors import Lano3dpError
-    from lano3dp.evaluate import EvalConfig, evaluate
+    from lano3dp.cli import _options
+    from lano3dp.evaluate import EvalConfig, episode_log_path, evaluate
     from lano3dp.policy.pretrained import packaged_checkpoint
 
     console = Console(stderr=True)
+    _options.task_name(task)
+    _options.variation(variation)
+    _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
+    _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
+    _options.existing_path(checkpoint, "--checkpoint")
+    _options.output_path(out, folder=False)
+    _options.output_path(video_dir, "--video-dir", folder=True)
     if checkpoint is None:
         if task is None:
-            console.print("[red]error:[/red] give --checkpoint, or --task to evaluate the policy packaged for it")
-            raise typer.Exit(1)
-        try:
-            checkpoint = packaged_checkpoint(task)
-        except Lano3dpError as error:
-            console.print(f"[red]error:[/red] {error}")
-            raise typer.Exit(1) from error
+            raise typer.BadParameter("give --checkpoint, or --task to evaluate the policy packaged for it",
+                                     param_hint="--checkpoint")
+        checkpoint = packaged_checkpoint(task)
     config = EvalConfig(
         checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
         obstacles=list(obstacles) if obstacles else None, guidance=guidance, rho=rho, last_steps=last_steps,
@@ -84,12 +88,10 @@ def eval_command(
             collisions += bool(record["collided"])
             bar.update(handle, completed=done, status=f"success {successes}/{done}  collided {collisions}/{done}")
 
-        try:
-            result = evaluate(config, progress=progress, command=command_line(ctx))
-        except (Lano3dpError, FileNotFoundError) as error:
-            bar.stop()
-            console.print(f"[red]error:[/red] {error}")
-            raise typer.Exit(1) from error
+        result = evaluate(config, progress=progress, command=command_line(ctx))
+    if result["timing"]["resumed_episodes"]:
+        console.print(f"resumed {result['timing']['resumed_episodes']} finished episode(s) from "
+                      f"{episode_log_path(out)}")
     console.print(summary_line(result["summary"]))
     summary = result["summary"]
     if summary.get("stage_rates"):

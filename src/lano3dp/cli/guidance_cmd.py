@@ -52,9 +52,15 @@ def guidance_figures(
     trajectories for several rho), top view, with the obstacle's body, contact line and Q*."""
     import torch
 
+    from lano3dp.cli import _options
     from lano3dp.guidance import Cylinder, Densified, GuidanceConfig, GuidanceMode, MetricGradient
     from lano3dp.guidance.diagnostics import DenoiseRecorder, plot_denoising, plot_trajectories_by_scale
 
+    _options.output_path(out, folder=True)
+    _options.choice(mode, ("clean", "noisy"), "--mode")
+    _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
+    _options.existing_path(checkpoint, "--checkpoint")
+    _options.existing_path(data, "--data")
     obstacle_cost = Cylinder(obstacle[:2], obstacle[2], held_radius=held_radius, margin=margin)
     if cost_kind not in ("paper", "metric", "metric+dense"):
         raise typer.BadParameter(f"--cost must be paper, metric or metric+dense, got {cost_kind!r}")

@@ -38,20 +38,23 @@ def run_command(
     """Run one instruction in the simulator and show what happened (plan, outcome, video, top-view plot)."""
     from rich.console import Console
 
+    from lano3dp.cli import _options
     from lano3dp.cli.eval_cmd import command_line
-    from lano3dp.errors import Lano3dpError
     from lano3dp.evaluate import RunConfig, run_instruction
 
     console = Console()
+    _options.task_name(task)
+    _options.variation(variation)
+    _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
+    _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
+    _options.existing_path(checkpoint, "--checkpoint")
+    _options.existing_path(registry, "--registry")
+    _options.output_path(out, folder=True)
     config = RunConfig(instruction=instruction, checkpoint=str(checkpoint) if checkpoint else None,
                        registry=str(registry) if registry else None, task=task, variation=variation,
                        guidance=guidance, rho=rho, last_steps=last_steps, metric_gradient=metric_push,
                        scheduler=scheduler, steps=steps,
                        checked=checked, compare=compare, max_steps=max_steps, seed=seed, out=str(out))
-    try:
-        result = run_instruction(config, log=console.print, command=command_line(ctx))
-    except (Lano3dpError, ValueError, FileNotFoundError) as error:
-        console.print(f"[red]error:[/red] {error}")
-        raise typer.Exit(1) from error
+    result = run_instruction(config, log=console.print, command=command_line(ctx))
     console.print(f"video(s): {', '.join(e['video'] for e in result['episodes'].values())}")
     console.print(f"top view: {result['top_view']}   record: {Path(out) / 'run.json'}")

@@ -34,8 +34,8 @@ def train_command(
     data: Path = typer.Option(..., "--data", help="Zarr episode store recorded by `lano3dp collect`."),
     out: Path = typer.Option(..., "--out", help="Run folder; an existing run there is resumed from its last "
                                                 "checkpoint."),
-    steps: int = typer.Option(3000, help="Total optimisation steps (a resumed run continues up to this)."),
-    batch_size: int = typer.Option(64, "--batch-size", help="Windows per step and per process."),
+    steps: int = typer.Option(3000, min=1, help="Total optimisation steps (a resumed run continues up to this)."),
+    batch_size: int = typer.Option(64, "--batch-size", min=1, help="Windows per step and per process."),
     lr: float = typer.Option(5e-4, help="AdamW peak learning rate (5e-4 suits CPU-length runs)."),
     warmup_steps: int = typer.Option(500, "--warmup-steps", help="Linear warm-up steps before the cosine decay."),
     minutes: float | None = typer.Option(None, help="Stop, checkpointed, after this many CPU-minutes of this "
@@ -71,27 +71,25 @@ def train_command(
     import os
 
     from lano3dp.augment import AugmentConfig
-    from lano3dp.errors import Lano3dpError
+    from lano3dp.cli import _options
     from lano3dp.policy import down_dims_for
     from lano3dp.train import TrainConfig, policy_config_for_dataset, train
 
-    try:
-        overrides = dict(obs_type=obs_type.value, point_encoder=encoder.value, down_dims=down_dims_for(size.value),
-                         horizon=horizon, n_obs_steps=n_obs_steps, n_action_steps=n_action_steps)
-        if n_points is not None:
-            overrides["n_points"] = n_points
-        policy = policy_config_for_dataset(data, **overrides)
-        config = TrainConfig(data=str(data), out=str(out), policy=policy, steps=steps, batch_size=batch_size, lr=lr,
-                             warmup_steps=warmup_steps, val_ratio=val_ratio, val_every=val_every,
-                             ckpt_every=ckpt_every, seed=seed, device=device, threads=threads, cpu_minutes=minutes,
-                             num_workers=num_workers, bf16=bf16, ema=ema, progress=progress,
-                             augment=AugmentConfig() if augment else None)
-        final = train(config)
-    except (Lano3dpError, ValueError, FileNotFoundError) as error:
-        if isinstance(error, typer.BadParameter):
-            raise
-        typer.secho(f"error: {error}", fg=typer.colors.RED, err=True)
-        raise typer.Exit(code=1) from error
+    _options.existing_path(data, "--data")
+    _options.output_path(out, folder=True)
+    _options.device(device)
+    # errors past here (a dataset that does not fit, a refused resume) are one line via the CLI's error boundary
+    overrides = dict(obs_type=obs_type.value, point_encoder=encoder.value, down_dims=down_dims_for(size.value),
+                     horizon=horizon, n_obs_steps=n_obs_steps, n_action_steps=n_action_steps)
+    if n_points is not None:
+        overrides["n_points"] = n_points
+    policy = policy_config_for_dataset(data, **overrides)
+    config = TrainConfig(data=str(data), out=str(out), policy=policy, steps=steps, batch_size=batch_size, lr=lr,
+                         warmup_steps=warmup_steps, val_ratio=val_ratio, val_every=val_every,
+                         ckpt_every=ckpt_every, seed=seed, device=device, threads=threads, cpu_minutes=minutes,
+                         num_workers=num_workers, bf16=bf16, ema=ema, progress=progress,
+                         augment=AugmentConfig() if augment else None)
+    final = train(config)
     if int(os.environ.get("RANK", "0")) == 0:
         typer.echo(f"final checkpoint: {final}")
 

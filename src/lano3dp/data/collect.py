@@ -64,6 +64,14 @@ class CollectConfig:
     max_steps: int | None = None  # episode limit (default: the task's); an expert that needs more fails
     progress: bool = True
 
+    def __post_init__(self):
+        # Checked before anything is written: a bad value must not leave a store that blocks the corrected run.
+        for name in ("episodes", "image_size", "n_points", "scene_points", "rgb_size", "min_points"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"CollectConfig: {name} must be >= 1, got {getattr(self, name)}")
+        if self.max_steps is not None and self.max_steps < 1:
+            raise ValueError(f"CollectConfig: max_steps must be >= 1, got {self.max_steps}")
+
 
 @dataclass
 class CollectResult:
@@ -84,6 +92,23 @@ def collect(task: str, episodes: int, out: str | Path, variation: str = "clean",
 
 
 def collect_episodes(config: CollectConfig) -> CollectResult:
+    """Append episodes to `config.out` until it holds `config.episodes`; one collector per store at a time."""
+    import shutil
+
+    from lano3dp.locking import WriteLock
+
+    with WriteLock(config.out):
+        created = not Path(config.out).exists()
+        try:
+            return _collect_episodes(config)
+        except BaseException:
+            # a first collection that failed before its first episode leaves nothing behind to block a re-run
+            if created and Path(config.out).exists() and EpisodeStore.open(config.out).n_episodes == 0:
+                shutil.rmtree(config.out, ignore_errors=True)
+            raise
+
+
+def _collect_episodes(config: CollectConfig) -> CollectResult:
     from tqdm.auto import tqdm
 
     from lano3dp.perception import ObjectObserver, SimOracleSegmenter

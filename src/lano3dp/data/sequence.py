@@ -13,6 +13,11 @@ from collections.abc import Sequence
 import numpy as np
 
 from lano3dp.data.store import EpisodeStore
+from lano3dp.errors import Lano3dpError
+
+
+class NonFiniteDataError(Lano3dpError, ValueError):
+    """A dataset holds NaN or infinite values where a policy would learn from them."""
 
 
 def split_episodes(n_episodes: int, val_ratio: float, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
@@ -24,6 +29,22 @@ def split_episodes(n_episodes: int, val_ratio: float, seed: int = 0) -> tuple[np
     if val_ratio > 0 and n_episodes >= 2:
         n_val = min(max(n_val, 1), n_episodes - 1)
     return np.sort(order[n_val:]), np.sort(order[:n_val])
+
+
+def check_finite(store: EpisodeStore, data: dict[str, np.ndarray], episodes: Sequence[int]) -> None:
+    """Refuse NaN/inf in the selected episodes, naming key, episode and step (a NaN would train silently)."""
+    ends = store.episode_ends
+    for key, values in data.items():
+        if not np.issubdtype(values.dtype, np.floating):
+            continue
+        for episode in episodes:
+            start = 0 if episode == 0 else int(ends[episode - 1])
+            bad = ~np.isfinite(values[start:int(ends[episode])].reshape(int(ends[episode]) - start, -1)).all(axis=1)
+            if bad.any():
+                step = int(np.argmax(bad))
+                raise NonFiniteDataError(f"{store.path}: data/{key} holds NaN or inf in episode {int(episode)} "
+                                         f"(step {step}, {int(bad.sum())} step(s) in all); re-collect the dataset "
+                                         "or leave that episode out")
 
 
 def window_indices(episode_ends: np.ndarray, episodes: Sequence[int], horizon: int, pad_before: int,
@@ -64,6 +85,7 @@ class SequenceDataset:
         self.n_obs_steps, self.horizon, self.n_action_steps = n_obs_steps, horizon, n_action_steps
         self.episodes = np.arange(store.n_episodes) if episodes is None else np.asarray(episodes, dtype=np.int64)
         self.data = store.load([*self.obs_keys, action_key])
+        check_finite(store, self.data, self.episodes)
         self.indices = window_indices(store.episode_ends, self.episodes, horizon,
                                       pad_before=n_obs_steps - 1, pad_after=n_action_steps - 1)
 

@@ -114,14 +114,44 @@ class EpisodeStore:
         return store
 
     def _validate(self) -> None:
+        """Refuse a store whose arrays do not hold every committed step (zarr would read fill values)."""
         ends = self._episode_ends
         if len(ends) and (np.any(np.diff(ends) <= 0) or ends[0] <= 0):
             raise CorruptFileError(self.path, "meta/episode_ends is not strictly increasing")
         for key in self.keys:
-            if self._root["data"][key].shape[0] < self.n_steps:
+            array = self._root["data"][key]
+            if array.shape[0] < self.n_steps:
+                episode = self.episode_of_row(array.shape[0])
                 raise CorruptFileError(
-                    self.path, f"data/{key} has {self._root['data'][key].shape[0]} rows, episodes need {self.n_steps}"
-                )
+                    self.path, f"data/{key} has {array.shape[0]} rows, but meta/episode_ends says episode {episode} "
+                    f"ends at row {int(ends[episode])} ({self.n_steps} rows in all): episodes {episode}.. are "
+                    "incomplete")
+            self._check_chunks(key, array)
+
+    def _check_chunks(self, key: str, array) -> None:
+        """Every chunk holding committed rows must be stored: a missing one would read as zeros."""
+        import itertools
+
+        from zarr.core.sync import sync
+
+        async def stored(prefix: str) -> set[str]:
+            return {name async for name in array.store.list_prefix(prefix)}
+
+        rows = array.chunks[0]
+        grid = [range(-(-self.n_steps // rows)), *(range(-(-n // c)) for n, c in
+                                                   zip(array.shape[1:], array.chunks[1:], strict=True))]
+        present = sync(stored(array.path + "/"))
+        for coords in itertools.product(*grid):
+            if f"{array.path}/{array.metadata.encode_chunk_key(coords)}" not in present:
+                first = coords[0] * rows
+                raise CorruptFileError(
+                    self.path, f"data/{key} is missing chunk {'/'.join(map(str, coords))} (rows {first}-"
+                    f"{min(first + rows, self.n_steps) - 1}, episode {self.episode_of_row(first)}); restore the "
+                    "dataset or re-collect it")
+
+    def episode_of_row(self, row: int) -> int:
+        """Index of the episode that holds buffer row `row` (n_episodes - 1 for rows past the end)."""
+        return int(min(np.searchsorted(self._episode_ends, row, side="right"), max(self.n_episodes - 1, 0)))
 
     # ---- properties ---------------------------------------------------------------------
     @property
@@ -159,13 +189,23 @@ class EpisodeStore:
         length = next(iter(lengths.values()))
         if length == 0 or any(n != length for n in lengths.values()):
             raise DatasetSchemaError(f"episode arrays must share a non-zero length on axis 0, got {lengths}")
-        data = self._root["data"]
         existing = set(self.keys)
         if existing and existing != set(episode):
             raise DatasetSchemaError(
                 f"episode keys {sorted(episode)} differ from the store's {sorted(existing)}"
             )
         start = self.n_steps
+        # Store every chunk, even one equal to the fill value, so that a missing chunk file always means damage.
+        with zarr.config.set({"array.write_empty_chunks": True}):
+            self._write_rows(episode, existing, start, length)
+        ends = self._root["meta/episode_ends"]
+        ends.resize((self.n_episodes + 1,))
+        ends[self.n_episodes] = start + length  # the commit point
+        self._episode_ends = np.append(self._episode_ends, start + length)
+        return self.n_episodes - 1
+
+    def _write_rows(self, episode: Mapping[str, np.ndarray], existing: set[str], start: int, length: int) -> None:
+        data = self._root["data"]
         for key, value in episode.items():
             value = np.asarray(value)
             if key not in existing:
@@ -181,11 +221,6 @@ class EpisodeStore:
             # Drops rows left by an append that was cut short, then writes after the last episode.
             array.resize((start + length, *array.shape[1:]))
             array[start:] = value
-        ends = self._root["meta/episode_ends"]
-        ends.resize((self.n_episodes + 1,))
-        ends[self.n_episodes] = start + length  # the commit point
-        self._episode_ends = np.append(self._episode_ends, start + length)
-        return self.n_episodes - 1
 
     # ---- reading ------------------------------------------------------------------------
     def episode_slice(self, index: int) -> slice:

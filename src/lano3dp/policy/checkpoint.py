@@ -28,7 +28,7 @@ import torch
 from torch import nn
 
 from lano3dp.errors import CorruptFileError
-from lano3dp.policy.modeling import load_safetensors
+from lano3dp.policy.modeling import load_safetensors, save_safetensors
 
 STATE_TENSORS = "training_state.safetensors"
 STATE_JSON = "training_state.json"
@@ -118,11 +118,9 @@ class TrainingState:
 
 def save_training_state(directory: Path, *, step: int, model: nn.Module, optimizer: torch.optim.Optimizer,
                         lr_scheduler, ema: EMA | None, extra: dict[str, Any] | None = None) -> None:
-    from safetensors.torch import save_file
-
     tensors, optimizer_meta = flatten_optimizer_state(optimizer.state_dict())
     tensors |= {f"model.{key}": value.detach().cpu().contiguous() for key, value in model.state_dict().items()}
-    save_file(tensors, str(directory / STATE_TENSORS), metadata={"format": "lano3dp-training-state"})
+    save_safetensors(tensors, directory / STATE_TENSORS, metadata={"format": "lano3dp-training-state"})
     meta = {"step": step, "optimizer": optimizer_meta, "lr_scheduler": lr_scheduler.state_dict(),
             "ema": ema.state() if ema is not None else None, "extra": extra or {}}
     (directory / STATE_JSON).write_text(json.dumps(meta, indent=2, default=_jsonable))

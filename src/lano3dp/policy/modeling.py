@@ -218,13 +218,11 @@ class DiffusionPolicy(nn.Module):
     # ---- persistence -------------------------------------------------------------------
     def save_pretrained(self, directory: str | Path) -> Path:
         """Write config.json, model.safetensors and normalizer.json into `directory` (created if needed)."""
-        from safetensors.torch import save_file
-
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         state = {key: value.detach().cpu().contiguous() for key, value in self.state_dict().items()}
-        save_file(state, str(directory / WEIGHTS_NAME),
-                  metadata={"format": "lano3dp-policy", "format_version": str(CHECKPOINT_FORMAT_VERSION)})
+        save_safetensors(state, directory / WEIGHTS_NAME,
+                         metadata={"format": "lano3dp-policy", "format_version": str(CHECKPOINT_FORMAT_VERSION)})
         stats = {key: {name: value.tolist() for name, value in item.items()}
                  for key, item in self.normalizer_stats().items()}
         _write_text(directory / NORMALIZER_NAME, json.dumps(stats, indent=2))
@@ -297,13 +295,52 @@ def load_config(path: Path) -> PolicyConfig:
         raise CorruptFileError(path, f"not a valid policy config ({type(error).__name__}: {error})") from error
 
 
+CHECKSUM_KEY = "weights_sha256"
+
+
+def tensors_checksum(tensors: Mapping[str, torch.Tensor]) -> str:
+    """SHA-256 over every tensor's name, dtype, shape and bytes, in name order: what a file holds, as stored
+    (an fp16 export is summed over its fp16 values)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    for name in sorted(tensors):
+        value = tensors[name].detach().cpu().contiguous()
+        digest.update(f"{name}|{value.dtype}|{tuple(value.shape)}|".encode())
+        digest.update(value.reshape(-1).view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()
+
+
+def save_safetensors(tensors: Mapping[str, torch.Tensor], path: Path, metadata: Mapping[str, str]) -> Path:
+    """Write tensors with their checksum in the metadata, atomically (temporary file + rename)."""
+    from safetensors.torch import save_file
+
+    path = Path(path)
+    temporary = path.with_name(path.name + ".tmp")
+    save_file(dict(tensors), str(temporary), metadata={**metadata, CHECKSUM_KEY: tensors_checksum(tensors)})
+    os.replace(temporary, path)
+    return path
+
+
 def load_safetensors(path: Path) -> dict[str, torch.Tensor]:
-    """Read a safetensors file; any damage becomes a CorruptFileError naming the file."""
-    from safetensors.torch import load_file
+    """Read a safetensors file and check it against the checksum in its metadata (files written before
+    checksums are checked for non-finite weights only); any damage becomes a CorruptFileError naming the file."""
+    from safetensors import safe_open
 
     if not path.exists():
         raise FileNotFoundError(f"{path} does not exist")
     try:
-        return load_file(str(path))
+        with safe_open(str(path), framework="pt") as handle:
+            metadata = handle.metadata() or {}
+            tensors = {name: handle.get_tensor(name) for name in handle.keys()}
     except Exception as error:  # safetensors raises SafetensorError / OSError / ValueError on damage
         raise CorruptFileError(path, f"unreadable safetensors file ({type(error).__name__}: {error})") from error
+    expected = metadata.get(CHECKSUM_KEY)
+    if expected is not None and tensors_checksum(tensors) != expected:
+        raise CorruptFileError(path, "the weights do not match the checksum written with them (the file was "
+                                     "damaged after it was saved); restore it from a copy or retrain")
+    if expected is None:
+        for name, value in tensors.items():
+            if value.is_floating_point() and not torch.isfinite(value).all():
+                raise CorruptFileError(path, f"tensor {name} holds NaN or inf")
+    return tensors

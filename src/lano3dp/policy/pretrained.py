@@ -23,6 +23,7 @@ from lano3dp.policy.modeling import (
     WEIGHTS_NAME,
     DiffusionPolicy,
     resolve_checkpoint,
+    save_safetensors,
 )
 
 PACKAGED_ROOT = Path(__file__).resolve().parent.parent / "checkpoints"
@@ -64,8 +65,6 @@ def export_fp16(checkpoint: str | Path, out: str | Path, record: dict[str, Any] 
     The policy's config must carry its observation settings (extra["observation"]): a shipped folder has
     no dataset beside it to read them from.
     """
-    from safetensors.torch import save_file
-
     source = resolve_checkpoint(checkpoint)
     policy = DiffusionPolicy.from_pretrained(source)
     if "observation" not in policy.config.extra:
@@ -81,9 +80,10 @@ def export_fp16(checkpoint: str | Path, out: str | Path, record: dict[str, Any] 
         if value.is_floating_point() and not key.startswith("normalizer."):
             value = value.to(torch.float16)
         state[key] = value
-    save_file(state, str(out / WEIGHTS_NAME), metadata={"format": "lano3dp-policy",
-                                                        "format_version": str(CHECKPOINT_FORMAT_VERSION),
-                                                        "weights_dtype": "float16"})
+    # the checksum is over the fp16 values the file holds, so loading checks what is on disk
+    save_safetensors(state, out / WEIGHTS_NAME, metadata={"format": "lano3dp-policy",
+                                                          "format_version": str(CHECKPOINT_FORMAT_VERSION),
+                                                          "weights_dtype": "float16"})
     for name in (CONFIG_NAME, NORMALIZER_NAME):
         shutil.copy2(source / name, out / name)
     if record is not None:

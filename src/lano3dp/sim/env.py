@@ -82,6 +82,10 @@ class SimulationError(Lano3dpError, RuntimeError):
     """The physics diverged (MuJoCo reported an unstable state)."""
 
 
+class EnvClosedError(Lano3dpError, RuntimeError):
+    """The environment was used after close()."""
+
+
 @dataclass
 class EpisodeInfo:
     seed: int
@@ -154,6 +158,7 @@ class TabletopEnv(gym.Env):
     # ---- episode construction -------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Build the scene of episode `seed`. options: {"variation": ...} overrides the variation."""
+        self._check_open()
         super().reset(seed=seed)
         options = options or {}
         variation = Variation.parse(options["variation"]) if "variation" in options else self.variation
@@ -235,7 +240,12 @@ class TabletopEnv(gym.Env):
         mujoco.mju_mat2Quat(quat, rotation.reshape(-1))
         return position, quat, gripper, clipped
 
+    def _check_open(self) -> None:
+        if getattr(self, "_closed", False):
+            raise EnvClosedError("this TabletopEnv was closed; make a new one to run more episodes")
+
     def step(self, action):
+        self._check_open()
         if self.data is None:
             raise RuntimeError("call reset() before step()")
         position, quat, gripper, clipped = self.validate_action(action)
@@ -344,6 +354,7 @@ class TabletopEnv(gym.Env):
 
     def frame(self) -> RGBDFrame:
         """The current camera images as an `RGBDFrame` with ground-truth instance names and attributes."""
+        self._check_open()
         if self._frame is None:
             images = self._images
             rgb = images.rgb if images.rgb is not None else np.zeros((self.height, self.width, 3), np.uint8)
@@ -397,11 +408,13 @@ class TabletopEnv(gym.Env):
         return self.task.plan_expert(self.sim, self.episode.layout)
 
     def render(self):
+        self._check_open()
         if self._images.rgb is not None:
             return self._images.rgb
         return self._renderer.render(self.data, "front", rgb=True).rgb
 
     def close(self):
+        self._closed = True
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None

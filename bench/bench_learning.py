@@ -115,7 +115,8 @@ def collect_report(args, tasks, recipes, seeds) -> dict:
                     continue
                 train_config = json.loads((run / "train_config.json").read_text())
                 cells.append({"task": task, "recipe": recipe, "seed": seed, "final": curve[-1], "curve": curve,
-                              "planned_steps": train_config["steps"], "batch_size": train_config["batch_size"],
+                              "planned_steps": train_config["steps"], "cpu_minutes_budget": train_config["cpu_minutes"],
+                              "batch_size": train_config["batch_size"],
                               "lr": train_config["lr"], "policy": train_config["policy"]})
     return {"cells": cells}
 
@@ -172,7 +173,13 @@ def package(args, cell: dict, report: dict) -> Path:
               "success_rate": cell["final"]["success_rate"], "successes": cell["final"]["successes"],
               "episodes": cell["final"]["episodes"], "ci95": cell["final"]["ci95"],
               "evaluation": "clean scenes, seeds 1000000 + i, under the simulator's motion limits",
-              "stages": cell["final"].get("stages"), "made_by": report["command"], "when_utc": report["when_utc"]}
+              "stages": cell["final"].get("stages"),
+              # a command that re-makes this cell (every stage resumes or is skipped when its output exists)
+              "made_by": f"OMP_NUM_THREADS=1 python bench/bench_learning.py --tasks {cell['task']} --recipes "
+                         f"{cell['recipe']} --seeds {cell['seed']} --demos {args.demos} --minutes "
+                         f"{cell['cpu_minutes_budget']:g} --checkpoints {len(cell['curve'])} --episodes "
+                         f"{cell['final']['episodes']}",
+              "packaged_by": report["command"], "when_utc": report["when_utc"]}
     return export_fp16(final, PACKAGED_ROOT / cell["task"], record=record)
 
 

@@ -617,6 +617,9 @@ def ground_obstacles(frame, phrases: Sequence[str]) -> tuple[list[str], list[str
     return kept, notes
 
 
+_SCENE_TRIES = 20  # scenes `run` looks through for one with room for an obstacle
+
+
 def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
                     command: str | None = None) -> dict[str, Any]:
     """Plan, perceive, act: one episode for one instruction. Writes run.json, video.mp4 and top_view.png
@@ -660,8 +663,19 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
                       max_steps=config.max_steps)
     observer = ObjectObserver(SimOracleSegmenter(), n_points=policy.config.n_points,
                               crop_low=settings.crop_low, crop_high=settings.crop_high)
-    _, _ = env.reset(seed=config.seed)
+    seed = config.seed
+    _, _ = env.reset(seed=seed)
     frame = env.frame()
+    if plan.obstacles and env.episode.variation.has("obstacle"):
+        # a layout can leave no room for an obstacle on the path (e.g. the drawer right beside the start):
+        # show the instruction on the next scene that has one rather than fail on this one
+        while not any(a.get("role") == "obstacle" for a in frame.instance_attributes.values()) \
+                and seed < config.seed + _SCENE_TRIES:
+            seed += 1
+            env.reset(seed=seed)
+            frame = env.frame()
+        if seed != config.seed:
+            log(f"note: scene {config.seed} has no room for an obstacle on the path; using scene {seed}")
     scene_objects = [n for n, a in frame.instance_attributes.items() if a.get("role") != "robot"]
     try:
         plan = decomposer.decompose(config.instruction, scene_objects)
@@ -674,7 +688,7 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     targets = plan.target_phrases if policy.config.obs_type == "objects" else None
     carried = registry.get(plan.skill).carried_slot if plan.skill in registry else None
     held = plan.target_phrases[carried] if carried is not None else None
-    log(f"task {task} / {variation}, seed {config.seed}: targets {targets}, obstacles {obstacles}")
+    log(f"task {task} / {variation}, seed {seed}: targets {targets}, obstacles {obstacles}")
 
     conditions = [("guided" if config.guidance != "none" else "unguided", config.guidance)]
     if config.compare and config.guidance != "none":
@@ -686,10 +700,10 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
                                  metric_gradient=config.metric_gradient, scheduler=config.scheduler, steps=config.steps,
                                  checked=config.checked,
                                  margin=config.margin)
-        runner = PolicyRunner(policy, observer, runtime_config(eval_config, config.seed), target_phrases=targets,
+        runner = PolicyRunner(policy, observer, runtime_config(eval_config, seed), target_phrases=targets,
                               obstacle_phrases=obstacles, held_object=held)
         frames: list[np.ndarray] = []
-        result = rollout(env, runner, seed=config.seed, max_steps=config.max_steps,
+        result = rollout(env, runner, seed=seed, max_steps=config.max_steps,
                          on_frame=lambda f, info, frames=frames: frames.append(f.rgb.copy()))
         video = write_video(out / f"video_{label}.mp4", frames)
         record = result.to_dict(include_path=True)
@@ -708,7 +722,7 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
                          title=f"'{config.instruction}'")
     result = {"command": command or shlex.join(["lano3dp", *sys.argv[1:]]), "config": asdict(config),
               "plan": plan.model_dump(),
-              "task": task, "variation": variation, "obstacles": obstacles, "notes": notes,
+              "task": task, "variation": variation, "seed": seed, "obstacles": obstacles, "notes": notes,
               "checkpoint": str(checkpoint), "episodes": episodes, "top_view": str(plot)}
     write_json(out / "run.json", result)
     env.close()

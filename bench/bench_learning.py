@@ -11,6 +11,7 @@ Resumable: datasets grow to size, training resumes from its last checkpoint, an 
 with the same configuration is skipped. Outputs:
     <work>/...                         datasets, runs, per-evaluation JSONs (large; not committed)
     results/learning<tag>.json         every number with its 95% interval, CPU-minutes, seeds and the command
+    results/learning<tag>.md           the same as a table, headed by the command
     results/learning<tag>.png          success against CPU-minutes, one panel per task
 
 One process per task over one --work folder uses both cores:
@@ -154,6 +155,35 @@ def plot(path: Path, report: dict) -> None:
     plt.close(figure)
 
 
+def markdown(report: dict) -> str:
+    """The report as a Markdown table: final success with its interval, and the curve along training."""
+    from lano3dp.report import markdown_table, percent
+
+    rows = []
+    for cell in report["cells"]:
+        final = cell["final"]
+        low, high = final["ci95"]
+        curve = ", ".join(f"{percent(p['success_rate'])} @ {p['cpu_minutes']:.1f}" for p in cell["curve"])
+        rows.append([f"`{cell['task']}`", cell["recipe"], cell["seed"],
+                     f"**{percent(final['success_rate'])}** ({final['successes']}/{final['episodes']}; "
+                     f"{percent(low)}–{percent(high)})", f"{final['cpu_minutes']:.1f}", final["step"], curve])
+    setup = report["setup"]
+    budgets = "/".join(sorted({f"{cell['cpu_minutes_budget']:g}" for cell in report["cells"]}))
+    return "\n".join([
+        "# Success against CPU-minutes of training",
+        "",
+        f"Made by `{report['command']}` ({report['when_utc']}).",
+        "",
+        f"{setup['demos']} scripted demonstrations per task; a budget of {budgets} CPU-minutes of "
+        f"training (one thread); final checkpoint on {setup['final_episodes']} clean episodes, earlier ones on "
+        f"{setup['curve_episodes']}; {setup['evaluation']}. Success with its 95% Wilson interval.",
+        "",
+        markdown_table(["task", "recipe", "seed", "final success (95% CI)", "CPU-min", "steps",
+                        "along training (success @ CPU-min)"], rows),
+        "",
+    ])
+
+
 def package(args, cell: dict, report: dict) -> Path:
     """Ship the cell's final checkpoint as the package's policy for its task, with the numbers it earned."""
     from lano3dp.data.store import EpisodeStore
@@ -216,6 +246,7 @@ def main(argv=None) -> None:
               **report}
     out = ROOT / "results" / f"learning{args.tag}.json"
     write_json(out, report)
+    out.with_suffix(".md").write_text(markdown(report))
     plot(out.with_suffix(".png"), report)
     if args.package:
         for cell in report["cells"]:

@@ -168,7 +168,8 @@ def markdown(report: dict) -> str:
                      f"**{percent(final['success_rate'])}** ({final['successes']}/{final['episodes']}; "
                      f"{percent(low)}–{percent(high)})", f"{final['cpu_minutes']:.1f}", final["step"], curve])
     setup = report["setup"]
-    budgets = "/".join(sorted({f"{cell['cpu_minutes_budget']:g}" for cell in report["cells"]}))
+    budgets = "/".join(sorted({f"{c['cpu_minutes_budget']:g}" if c["cpu_minutes_budget"] else "no"
+                               for c in report["cells"]}))
     return "\n".join([
         "# Success against CPU-minutes of training",
         "",
@@ -207,8 +208,8 @@ def package(args, cell: dict, report: dict) -> Path:
               # a command that re-makes this cell (every stage resumes or is skipped when its output exists)
               "made_by": f"OMP_NUM_THREADS=1 python bench/bench_learning.py --tasks {cell['task']} --recipes "
                          f"{cell['recipe']} --seeds {cell['seed']} --demos {args.demos} --minutes "
-                         f"{cell['cpu_minutes_budget']:g} --checkpoints {len(cell['curve'])} --episodes "
-                         f"{cell['final']['episodes']}",
+                         f"{cell['cpu_minutes_budget'] or args.minutes:g} --checkpoints {len(cell['curve'])} "
+                         f"--episodes {cell['final']['episodes']}",
               "packaged_by": report["command"], "when_utc": report["when_utc"]}
     return export_fp16(final, PACKAGED_ROOT / cell["task"], record=record)
 

@@ -17,7 +17,9 @@ def collect_command(
     seed: int = typer.Option(0, "--seed", help="Base seed; episode i uses seed + i (a failed expert seed is "
                                                "replaced by seed + i + k * 100003)."),
     image_size: int = typer.Option(128, "--image-size", min=16, help="Camera image side in pixels."),
-    n_points: int = typer.Option(256, "--n-points", min=1, help="Points per object cloud."),
+    n_points: int = typer.Option(64, "--n-points", min=1,
+                                 help="Points per object cloud (the default policy trains on 64; record more to "
+                                      "train on more)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
 ) -> None:
     """Record scripted-expert demonstrations (only successful episodes are kept) into a zarr dataset."""

@@ -55,7 +55,7 @@ class CollectConfig:
     variation: str = "clean"
     seed: int = 0
     image_size: int = 128
-    n_points: int = 256
+    n_points: int = 64  # what the default policy trains on (PolicyConfig.n_points)
     scene_points: int = 512
     rgb_size: int = 96
     crop_low: tuple[float, float, float] = CROP_LOW
@@ -84,7 +84,7 @@ class CollectResult:
 
 
 def collect(task: str, episodes: int, out: str | Path, variation: str = "clean", seed: int = 0,
-            image_size: int = 128, n_points: int = 256, progress: bool = True, **options) -> CollectResult:
+            image_size: int = 128, n_points: int = 64, progress: bool = True, **options) -> CollectResult:
     """Record scripted-expert episodes of `task` into `out` until it holds `episodes` episodes."""
     config = CollectConfig(task=task, episodes=episodes, out=Path(out), variation=variation, seed=seed,
                            image_size=image_size, n_points=n_points, progress=progress, **options)

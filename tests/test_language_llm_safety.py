@@ -30,7 +30,8 @@ def reply(skill, targets, obstacles=(), refusal=None):
 
 class LlamaCppStub:
     """/v1/chat/completions like llama.cpp's server; `script` items are reply dicts, strings,
-    ("slow", seconds) to stall until the client hangs up, or ("length", text) for a cut-off reply."""
+    ("slow", seconds) to stall until the client hangs up, ("length", text) for a cut-off reply, or
+    ("raw", bytes) for an HTTP 200 whose body is those bytes."""
 
     def __init__(self):
         self.script: list = []
@@ -54,6 +55,8 @@ class LlamaCppStub:
                 if isinstance(item, tuple) and item[0] == "slow":
                     stub._stall(self.connection, item[1])
                     return
+                if isinstance(item, tuple) and item[0] == "raw":  # an HTTP 200 whose body is not a completion
+                    return self._send_bytes(200, item[1])
                 if isinstance(item, tuple) and item[0] == "length":
                     finish, item = "length", item[1]
                 content = item if isinstance(item, str) else json.dumps(item)
@@ -62,8 +65,10 @@ class LlamaCppStub:
                 self._send(200, completion | {"choices": [choice]})
 
             def _send(self, status, payload):
+                self._send_bytes(status, json.dumps(payload).encode())
+
+            def _send_bytes(self, status, data):
                 stub.statuses.append(status)
-                data = json.dumps(payload).encode()
                 self.send_response(status)
                 self.send_header("Content-Type", "application/json")
                 self.send_header("Content-Length", str(len(data)))

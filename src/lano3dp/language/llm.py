@@ -214,8 +214,8 @@ class LLMDecomposer:
         for attempt in range(2):
             try:
                 content, cut_off = self._ask(messages)
-            except openai.OpenAIError as error:
-                errors.append(f"endpoint error: {type(error).__name__}: {error}")
+            except (openai.OpenAIError, ValueError) as error:  # ValueError: an HTTP 200 whose body is not JSON
+                errors.append(f"endpoint error: {type(error).__name__}: {str(error)[:200]}")
                 break
             replies.append(content or "")
             try:

@@ -7,6 +7,13 @@ from collections.abc import Sequence
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
+# Bounds on any plan, from the rules or a model: no skill has more than 3 slots, no tabletop scene dozens of
+# obstacles, and no object name is a paragraph. A reply beyond them is refused, not truncated silently.
+MAX_TARGETS = 8
+MAX_OBSTACLES = 16
+MAX_NAME_CHARS = 64
+MAX_WORD_CHARS = 32
+
 
 def _clean(value: str | None) -> str | None:
     if value is None:
@@ -28,11 +35,15 @@ class ObjectRef(BaseModel):
 
     model_config = ConfigDict(frozen=True, extra="forbid")
 
-    name: str = Field(min_length=1, description="kind noun of the object, e.g. 'bowl' or 'watering can'")
-    color: str | None = Field(default=None, description="colour word, e.g. 'red', or null")
-    size: str | None = Field(default=None, description="size word, e.g. 'small' or 'large', or null")
+    name: str = Field(min_length=1, max_length=MAX_NAME_CHARS,
+                      description="kind noun of the object, e.g. 'bowl' or 'watering can'")
+    color: str | None = Field(default=None, max_length=MAX_WORD_CHARS,
+                              description="colour word, e.g. 'red', or null")
+    size: str | None = Field(default=None, max_length=MAX_WORD_CHARS,
+                             description="size word, e.g. 'small' or 'large', or null")
     position: str | None = Field(
-        default=None, description="position word said for the object, e.g. 'top', 'left', 'nearest', or null"
+        default=None, max_length=MAX_WORD_CHARS,
+        description="position word said for the object, e.g. 'top', 'left', 'nearest', or null"
     )
 
     @field_validator("name", "color", "size", "position", mode="before")
@@ -62,10 +73,20 @@ class TaskPlan(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    skill: str = Field(min_length=1, description="name of the skill to run, from the skill list")
-    targets: list[ObjectRef] = Field(description="task objects, in the order of the skill's object slots")
+    skill: str = Field(min_length=1, max_length=MAX_NAME_CHARS,
+                       description="name of the skill to run, from the skill list")
+    targets: list[ObjectRef] = Field(max_length=MAX_TARGETS,
+                                     description="task objects, in the order of the skill's object slots")
     obstacles: list[ObjectRef] = Field(default_factory=list, description="objects to keep away from")
     warnings: list[str] = Field(default_factory=list, description="what the decomposer was unsure of")
+
+    @field_validator("obstacles")
+    @classmethod
+    def _distinct_and_bounded(cls, obstacles: list[ObjectRef]) -> list[ObjectRef]:
+        distinct = list(dict.fromkeys(obstacles))  # the same obstacle twice is one cost, not two
+        if len(distinct) > MAX_OBSTACLES:
+            raise ValueError(f"{len(distinct)} distinct obstacles; at most {MAX_OBSTACLES} are accepted")
+        return distinct
 
     @property
     def target_phrases(self) -> list[str]:
@@ -109,6 +130,16 @@ class PlanReply(BaseModel):
         return TaskPlan(skill=self.skill, targets=self.targets, obstacles=self.obstacles)
 
 
+def _without_bounds(node):
+    """The schema without length bounds: strict structured-output endpoints reject maxLength and friends;
+    the bounds are checked on the reply instead (TaskPlan, ObjectRef)."""
+    if isinstance(node, dict):
+        return {k: _without_bounds(v) for k, v in node.items() if k not in ("maxLength", "minLength", "maxItems")}
+    if isinstance(node, list):
+        return [_without_bounds(v) for v in node]
+    return node
+
+
 def plan_json_schema(skill_names: Sequence[str] | None = None) -> dict:
     """JSON schema of a model's reply (`PlanReply`: a plan or a refusal) for structured output.
 
@@ -116,7 +147,7 @@ def plan_json_schema(skill_names: Sequence[str] | None = None) -> dict:
     optional) and no extra keys; with `skill_names` the skill becomes an enum (or null), so a
     constrained decoder cannot invent one.
     """
-    schema = copy.deepcopy(PlanReply.model_json_schema())
+    schema = _without_bounds(copy.deepcopy(PlanReply.model_json_schema()))
     for definition in [schema, *schema.get("$defs", {}).values()]:
         # Class docstrings and titles only cost prompt tokens; the field descriptions stay.
         definition.pop("description", None)

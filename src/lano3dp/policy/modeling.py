@@ -1,7 +1,8 @@
 """DiffusionPolicy: P(action trajectory | object clouds, robot state) by DDPM, with cost-guided sampling.
 
 Training: `compute_loss` (epsilon prediction, Chi et al.). Inference: `predict_action_chunk`, whose
-denoising loop is `lano3dp.guidance.sampler.denoise`, so guided and unguided sampling share one loop.
+denoising loop is `lano3dp.guidance.sampler.denoise`, so guided and unguided sampling share one loop;
+`reset` / `select_action` are the control-loop contract (LeRobot's): one observation in, one action out.
 Checkpoints are folders: config.json + model.safetensors (weights and normaliser statistics) +
 normalizer.json (the same statistics, human-readable); loading never unpickles.
 """
@@ -10,6 +11,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import NamedTuple
@@ -81,6 +83,7 @@ class DiffusionPolicy(nn.Module):
                                       config.down_dims, config.kernel_size, config.n_groups)
         self.noise_scheduler = make_scheduler(config, "ddpm")
         self._schedulers: dict[str, object] = {}
+        self.reset()
 
     @property
     def device(self) -> torch.device:
@@ -214,6 +217,54 @@ class DiffusionPolicy(nn.Module):
             self.train(was_training)
         start = config.n_obs_steps - 1
         return ActionChunk(trajectory[:, start:start + config.n_action_steps], trajectory)
+
+    # ---- control loop ------------------------------------------------------------------
+    def reset(self) -> None:
+        """Start a new episode: forget the observation window, the queued actions and the last chunk."""
+        self._obs_queue: dict[str, deque[torch.Tensor]] = {key: deque(maxlen=self.config.n_obs_steps)
+                                                          for key in self.config.obs_keys}
+        self._action_queue: deque[torch.Tensor] = deque()
+        self.last_chunk: ActionChunk | None = None
+
+    def select_action(self, obs: Mapping[str, np.ndarray | torch.Tensor], **sample_kwargs) -> torch.Tensor:
+        """One control step: push one observation, sample a chunk when no action is queued, pop one action.
+
+        The window holds the last n_obs_steps observations; the first observation of an episode fills it
+        (Diffusion Policy's edge padding, as training windows are padded). A chunk's n_action_steps actions
+        are executed one per call before the next chunk is sampled, so a new chunk is sampled every
+        n_action_steps calls; `last_chunk` keeps it (its trajectory, for drawing or checking).
+
+        Args:
+            obs: one step, numpy or torch, raw units: {visual key: (B, ...) e.g. object_clouds (B, K, N, 3)
+                metres, "state": (B, 11)}; other keys are ignored.
+            **sample_kwargs: passed to predict_action_chunk when a chunk is sampled (guidance, position_cost,
+                generator, scheduler, num_inference_steps, ...).
+
+        Returns:
+            (B, action_dim) un-normalised action on the policy's device.
+        """
+        for key in self.config.obs_keys:
+            if key not in obs:
+                raise KeyError(f"observation is missing {key!r}; a {self.config.obs_type!r} policy needs "
+                               f"{self.config.obs_keys}")
+        step = {key: torch.as_tensor(obs[key], device=self.device) for key in self.config.obs_keys}
+        if step["state"].ndim != 2 or step["state"].shape[-1] != self.config.state_dim:
+            raise ValueError(f"select_action takes one step: state must be (batch, {self.config.state_dim}), got "
+                             f"{tuple(step['state'].shape)}; pass windows to predict_action_chunk instead")
+        for key, value in step.items():
+            queue = self._obs_queue[key]
+            if queue and queue[-1].shape != value.shape:
+                raise ValueError(f"{key} changed shape from {tuple(queue[-1].shape)} to {tuple(value.shape)} "
+                                 "within an episode; call reset() first")
+            if not queue:
+                queue.extend([value] * self.config.n_obs_steps)
+            else:
+                queue.append(value)
+        if not self._action_queue:
+            window = {key: torch.stack(list(queue), dim=1) for key, queue in self._obs_queue.items()}
+            self.last_chunk = self.predict_action_chunk(window, **sample_kwargs)
+            self._action_queue.extend(self.last_chunk.actions.transpose(0, 1))  # Ta tensors of (B, D)
+        return self._action_queue.popleft()
 
     # ---- persistence -------------------------------------------------------------------
     def save_pretrained(self, directory: str | Path) -> Path:

@@ -28,6 +28,7 @@ import os
 import shlex
 import sys
 import time
+import types
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
 from datetime import UTC, datetime
@@ -469,7 +470,7 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
     checkpoint = resolve_checkpoint(config.checkpoint)
-    if Path(config.out or "").is_dir():
+    if config.out and Path(config.out).is_dir():  # Path("") is ".", a folder: out=None must pass
         raise IsADirectoryError(f"--out {config.out} is a folder; give the results JSON file to write")
     log = EpisodeLog(episode_log_path(config.out), evaluation_identity(config, checkpoint)) if config.out else None
     records: dict[int, dict[str, Any]] = dict(log.records) if log else {}
@@ -727,3 +728,16 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     write_json(out / "run.json", result)
     env.close()
     return result
+
+
+class _CallableModule(types.ModuleType):
+    """`lano3dp.evaluate` is this module once it is imported (Python sets a submodule as its package's
+    attribute), and the public API promises `from lano3dp import evaluate; evaluate(config)`: calling the
+    module calls the function, so both readings work."""
+
+    def __call__(self, config: EvalConfig, progress: Callable[[int, int, dict], None] | None = None,
+                 command: str | None = None) -> dict[str, Any]:
+        return evaluate(config, progress, command)
+
+
+sys.modules[__name__].__class__ = _CallableModule

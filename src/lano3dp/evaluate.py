@@ -12,7 +12,8 @@ at multiples of 100003, see data.collect). Episodes run in
 shared 2-core machine; notes/cpu-cost.md sec. 1), and results come back in seed order, so the JSON does
 not depend on the number of workers. Latencies measured with several workers include their contention.
 
-Perception in simulation is the ground-truth segmenter (`SimOracleSegmenter`); targets are named by
+Perception is built by `perception.factory.build_segmenter` from `segmenter`: the simulator's ground-truth
+masks by default ("sim"), or the paper's open-vocabulary detector + SAM ("open-vocab"); targets are named by
 the phrases the scene uses (e.g. "blue bowl" among look-alikes) and obstacles, by default, are the
 objects the scene marks as obstacles. Crop box and image size follow the dataset the checkpoint was
 trained on (found through its train_config.json) and points per cloud follow the policy's config, so
@@ -73,6 +74,9 @@ class EvalConfig:
         n_action_steps: actions executed per chunk (None: the policy's).
         max_steps: episode step limit (None: the task's).
         image_size: camera resolution (None: the dataset's).
+        segmenter: "sim" (the simulator's ground-truth masks) or "open-vocab" (detector + SAM, the paper's
+            perception; needs detector_dir and sam_dir, local weight folders, never downloaded).
+        detector: "grounding_dino" or "owlv2" (open-vocab).
         workers: parallel processes (1 runs in this process).
         video_dir, n_videos: write MP4s of the first n_videos episodes there.
         out: results JSON path (None: not written).
@@ -102,6 +106,11 @@ class EvalConfig:
     video_dir: str | None = None
     n_videos: int = 2
     out: str | None = None
+    # added after results were first cached: pipeline.cached_eval reads a missing field as its default
+    segmenter: str = "sim"
+    detector: str = "grounding_dino"
+    detector_dir: str | None = None
+    sam_dir: str | None = None
 
     def __post_init__(self):
         self.checkpoint = str(self.checkpoint)
@@ -109,6 +118,30 @@ class EvalConfig:
             raise ValueError(f"episodes and workers must be >= 1, got {self.episodes}, {self.workers}")
         if self.guidance not in ("none", "noisy", "clean"):
             raise ValueError(f"guidance must be 'none', 'noisy' or 'clean', got {self.guidance!r}")
+        check_segmenter_choice(self.segmenter)
+
+
+SEGMENTERS = {"sim": "oracle", "open-vocab": "open_vocab"}  # option value -> perception.factory kind
+
+
+def check_segmenter_choice(segmenter: str) -> None:
+    if segmenter not in SEGMENTERS:
+        raise ValueError(f"segmenter must be one of {', '.join(SEGMENTERS)}, got {segmenter!r}")
+
+
+def build_config_segmenter(config):
+    """The segmenter an EvalConfig or RunConfig names, built by `perception.factory.build_segmenter`.
+
+    Raises:
+        ValueError: open-vocab without its weight folders (named).
+        MissingWeightsError: a weight folder that does not exist or is incomplete.
+    """
+    from lano3dp.perception import factory
+
+    return factory.build_segmenter(factory.SegmenterConfig(
+        kind=SEGMENTERS[config.segmenter], detector=config.detector,
+        detector_dir=Path(config.detector_dir) if config.detector_dir else None,
+        sam_dir=Path(config.sam_dir) if config.sam_dir else None))
 
 
 class PolicyTaskMismatchError(Lano3dpError, ValueError):
@@ -189,7 +222,7 @@ class EpisodeRunner:
     """Loads the policy and builds the env once, then runs episodes by seed (used by every worker)."""
 
     def __init__(self, config: EvalConfig):
-        from lano3dp.perception import ObjectObserver, SimOracleSegmenter
+        from lano3dp.perception import ObjectObserver
         from lano3dp.policy import DiffusionPolicy
         from lano3dp.sim import TabletopEnv
 
@@ -206,7 +239,7 @@ class EpisodeRunner:
         needs_rgb = self.policy.config.obs_type == "image" or bool(config.video_dir)
         self.env = TabletopEnv(task, variation=config.variation, image_size=image_size, render_rgb=needs_rgb,
                                max_steps=config.max_steps)
-        self.observer = ObjectObserver(SimOracleSegmenter(), n_points=self.policy.config.n_points,
+        self.observer = ObjectObserver(build_config_segmenter(config), n_points=self.policy.config.n_points,
                                        crop_low=settings.crop_low, crop_high=settings.crop_high)
 
     def run(self, seed: int, video_path: str | None = None) -> dict[str, Any]:
@@ -564,6 +597,7 @@ class RunConfig:
         task: simulator task (default: the plan's skill, whose registry name is the task name).
         variation: scene variation (default: "obstacle" when the plan names obstacles, else "clean").
         guidance, rho, last_steps, per_train_step, metric_gradient, scheduler, steps, checked, margin: as EvalConfig.
+        segmenter, detector, detector_dir, sam_dir: the perception of targets and obstacles, as EvalConfig.
         compare: also run the same scene without guidance, for the plot.
         seed: scene seed.
         out: folder for run.json, video.mp4 and top_view.png.
@@ -587,6 +621,13 @@ class RunConfig:
     max_steps: int | None = None
     seed: int = DEFAULT_EVAL_SEED
     out: str = "run_out"
+    segmenter: str = "sim"
+    detector: str = "grounding_dino"
+    detector_dir: str | None = None
+    sam_dir: str | None = None
+
+    def __post_init__(self):
+        check_segmenter_choice(self.segmenter)
 
 
 def ground_obstacles(frame, phrases: Sequence[str]) -> tuple[list[str], list[str]]:
@@ -599,7 +640,7 @@ def ground_obstacles(frame, phrases: Sequence[str]) -> tuple[list[str], list[str
     from lano3dp.perception.exceptions import PerceptionError
     from lano3dp.runtime import scene_obstacles
 
-    segmenter = SimOracleSegmenter()
+    segmenter = SimOracleSegmenter()  # what the simulated scene holds, whatever segmenter the policy then uses
     kept, missing, notes = [], [], []
     for phrase in phrases:
         try:
@@ -633,7 +674,7 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
 
 def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str | None) -> dict[str, Any]:
     from lano3dp.language import OfflineDecomposer, SkillRegistry, UnknownObjectError, default_registry
-    from lano3dp.perception import ObjectObserver, SimOracleSegmenter
+    from lano3dp.perception import ObjectObserver
     from lano3dp.policy import DiffusionPolicy
     from lano3dp.policy.pretrained import packaged_checkpoint, packaged_checkpoints
     from lano3dp.report import plot_top_view
@@ -662,7 +703,7 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     variation = config.variation or ("obstacle" if plan.obstacles else "clean")
     env = TabletopEnv(task, variation=variation, image_size=settings.image_size or 128, render_rgb=True,
                       max_steps=config.max_steps)
-    observer = ObjectObserver(SimOracleSegmenter(), n_points=policy.config.n_points,
+    observer = ObjectObserver(build_config_segmenter(config), n_points=policy.config.n_points,
                               crop_low=settings.crop_low, crop_high=settings.crop_high)
     seed = config.seed
     _, _ = env.reset(seed=seed)
@@ -699,8 +740,8 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
         eval_config = EvalConfig(checkpoint=str(checkpoint), guidance=mode, rho=config.rho,
                                  last_steps=config.last_steps, per_train_step=config.per_train_step,
                                  metric_gradient=config.metric_gradient, scheduler=config.scheduler, steps=config.steps,
-                                 checked=config.checked,
-                                 margin=config.margin)
+                                 checked=config.checked, margin=config.margin, segmenter=config.segmenter,
+                                 detector=config.detector, detector_dir=config.detector_dir, sam_dir=config.sam_dir)
         runner = PolicyRunner(policy, observer, runtime_config(eval_config, seed), target_phrases=targets,
                               obstacle_phrases=obstacles, held_object=held)
         frames: list[np.ndarray] = []

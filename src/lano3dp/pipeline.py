@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict
+from dataclasses import MISSING, asdict, fields
 from pathlib import Path
 from typing import Any
 
@@ -168,6 +168,10 @@ def cached_eval(config) -> dict[str, Any] | None:
         previous = json.loads(Path(config.out).read_text())
         wanted = json.loads(json.dumps(asdict(config)))
         made = dict(previous.get("config") or {})
+        # results saved before a field existed were made with its default (e.g. segmenter "sim")
+        for field in fields(config):
+            if field.name not in made and field.default is not MISSING:
+                made[field.name] = json.loads(json.dumps(field.default))
         for name in _EVAL_FIELDS_NOT_MEASURED:
             wanted.pop(name, None)
             made.pop(name, None)

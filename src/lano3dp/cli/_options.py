@@ -79,3 +79,23 @@ def device(value: str, option: str = "--device") -> str:
     if parsed.type not in ("cpu", "cuda"):
         raise typer.BadParameter(f"{value!r}: lano3dp trains on cpu or cuda", param_hint=option)
     return value
+
+
+SEGMENTERS = ("sim", "open-vocab")
+DETECTORS = ("grounding_dino", "owlv2")
+SEGMENTER_HELP = "Perception: sim (the simulator's ground-truth masks) | open-vocab (detector + SAM, the paper's)."
+DETECTOR_DIR_HELP = "open-vocab: local folder of the detector's weights (never downloaded)."
+SAM_DIR_HELP = "open-vocab: local folder of SAM's weights (never downloaded)."
+
+
+def segmenter(kind: str, detector: str, detector_dir: Path | None, sam_dir: Path | None) -> None:
+    """--segmenter and its weight folders, checked before any episode runs."""
+    choice(kind, SEGMENTERS, "--segmenter")
+    choice(detector, DETECTORS, "--detector")
+    existing_path(detector_dir, "--detector-dir")
+    existing_path(sam_dir, "--sam-dir")
+    if kind == "open-vocab":
+        missing = [name for name, path in (("--detector-dir", detector_dir), ("--sam-dir", sam_dir)) if path is None]
+        if missing:
+            raise typer.BadParameter(f"open-vocab needs local weight folders: give {' and '.join(missing)}",
+                                     param_hint="--segmenter")

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from lano3dp.cli import _options
 from lano3dp.evaluate import DEFAULT_DENSIFY, DEFAULT_LAST_STEPS, DEFAULT_RHO
 
 
@@ -43,6 +44,10 @@ def eval_command(
     video_dir: Path = typer.Option(None, help="Write MP4s of the first --n-videos episodes here."),
     n_videos: int = typer.Option(2, min=0, help="How many episodes get a video."),
     seed: int = typer.Option(1_000_000, help="First episode seed (apart from the demonstration seeds)."),
+    segmenter: str = typer.Option("sim", help=_options.SEGMENTER_HELP),
+    detector: str = typer.Option("grounding_dino", help="open-vocab: grounding_dino | owlv2."),
+    detector_dir: Path = typer.Option(None, help=_options.DETECTOR_DIR_HELP),
+    sam_dir: Path = typer.Option(None, help=_options.SAM_DIR_HELP),
     out: Path = typer.Option(Path("results.json"), help="Results JSON; each finished episode is also appended to "
                                                         "<out>.episodes.jsonl, from which a killed eval resumes."),
 ) -> None:
@@ -59,6 +64,7 @@ def eval_command(
     _options.variation(variation)
     _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
     _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
+    _options.segmenter(segmenter, detector, detector_dir, sam_dir)
     _options.existing_path(checkpoint, "--checkpoint")
     _options.output_path(out, folder=False)
     _options.output_path(video_dir, "--video-dir", folder=True)
@@ -73,7 +79,9 @@ def eval_command(
         per_train_step=per_train_step, metric_gradient=metric_push, densify=densify, scheduler=scheduler, steps=steps,
         checked=checked, margin=margin,
         held_radius=held_radius, max_steps=max_steps, workers=workers,
-        video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out))
+        video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out),
+        segmenter=segmenter, detector=detector, detector_dir=str(detector_dir) if detector_dir else None,
+        sam_dir=str(sam_dir) if sam_dir else None)
     console.print(f"[bold]eval[/bold] {checkpoint} on {task or '(dataset task)'} / {variation}: {episodes} episodes, "
                   f"guidance {guidance}" + (f" rho={rho} S={last_steps}" if guidance != "none" else "")
                   + f", {workers} worker(s)")

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import typer
 
+from lano3dp.cli import _options
 from lano3dp.evaluate import DEFAULT_LAST_STEPS, DEFAULT_RHO
 
 
@@ -33,6 +34,10 @@ def run_command(
     compare: bool = typer.Option(False, help="Also run the same scene without guidance (both paths in the plot)."),
     max_steps: int = typer.Option(None, help="Episode step limit (default: the task's)."),
     seed: int = typer.Option(1_000_000, help="Scene seed."),
+    segmenter: str = typer.Option("sim", help=_options.SEGMENTER_HELP),
+    detector: str = typer.Option("grounding_dino", help="open-vocab: grounding_dino | owlv2."),
+    detector_dir: Path = typer.Option(None, help=_options.DETECTOR_DIR_HELP),
+    sam_dir: Path = typer.Option(None, help=_options.SAM_DIR_HELP),
     out: Path = typer.Option(Path("run_out"), help="Folder for run.json, video_*.mp4 and top_view.png."),
 ) -> None:
     """Run one instruction in the simulator and show what happened (plan, outcome, video, top-view plot)."""
@@ -47,6 +52,7 @@ def run_command(
     _options.variation(variation)
     _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
     _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
+    _options.segmenter(segmenter, detector, detector_dir, sam_dir)
     _options.existing_path(checkpoint, "--checkpoint")
     _options.existing_path(registry, "--registry")
     _options.output_path(out, folder=True)
@@ -54,7 +60,10 @@ def run_command(
                        registry=str(registry) if registry else None, task=task, variation=variation,
                        guidance=guidance, rho=rho, last_steps=last_steps, metric_gradient=metric_push,
                        scheduler=scheduler, steps=steps,
-                       checked=checked, compare=compare, max_steps=max_steps, seed=seed, out=str(out))
+                       checked=checked, compare=compare, max_steps=max_steps, seed=seed, out=str(out),
+                       segmenter=segmenter, detector=detector,
+                       detector_dir=str(detector_dir) if detector_dir else None,
+                       sam_dir=str(sam_dir) if sam_dir else None)
     result = run_instruction(config, log=console.print, command=command_line(ctx))
     console.print(f"video(s): {', '.join(e['video'] for e in result['episodes'].values())}")
     console.print(f"top view: {result['top_view']}   record: {Path(out) / 'run.json'}")

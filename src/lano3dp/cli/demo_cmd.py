@@ -196,6 +196,10 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         parameters = sum(math.prod(weights.get_slice(name).get_shape())
                          for name in weights.keys() if not name.startswith("normalizer."))
     train_config = json.loads((checkpoint / "train_config.json").read_text())
+    progress_path = checkpoint / "progress.json"
+    progress = json.loads(progress_path.read_text()) if progress_path.exists() else {}
+    steps_done = int(progress.get("step", train_config["steps"]))
+    cpu_minutes = float(progress.get("cpu_s", 0.0)) / 60
     store = EpisodeStore.open(train_config["data"])
 
     rows = []
@@ -207,7 +211,7 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
                      centimetres(s["mean_min_clearance"]), f"{s['mean_path_length']:.2f} m",
                      f"{1000 * s['latency_mean_s']:.0f} ms" if s["latency_mean_s"] else None])
     plot_rates(out / "rates.png", [(name, r["summary"]) for name, r in results.items()],
-               title=f"{task}: {store.n_episodes} demos, {train_config['steps']} training steps")
+               title=f"{task}: {store.n_episodes} demos, {steps_done} training steps")
 
     # one paired scene (same seed) with and without guidance: prefer one where guidance changed the outcome
     plain, guided = results["obstacle, no guidance"]["episodes"], results["obstacle, guidance"]["episodes"]
@@ -238,7 +242,8 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         f"Policy: {parameters / 1e6:.2f} M parameters, UNet {tuple(policy_config.down_dims)}, "
         f"{policy_config.n_points} points per object, obs {policy_config.n_obs_steps} steps, horizon "
         f"{policy_config.horizon}, {policy_config.n_action_steps} actions per chunk; trained "
-        f"{train_config['steps']} steps at batch {train_config['batch_size']}, lr {train_config['lr']:g}; "
+        f"{steps_done} steps ({cpu_minutes:.1f} CPU-min) at batch {train_config['batch_size']}, "
+        f"lr {train_config['lr']:g}; "
         f"sampling {policy_config.inference_scheduler.upper()}-{policy_config.num_inference_steps}.",
         "",
         "## Results",

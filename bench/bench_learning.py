@@ -185,6 +185,14 @@ def markdown(report: dict) -> str:
     ])
 
 
+def work_option(work: Path) -> str:
+    """` --work <folder>` (relative to the repository) unless it is the default folder."""
+    default = ROOT / "bench" / "out" / "learning"
+    if work.resolve() == default.resolve():
+        return ""
+    return f" --work {work.resolve().relative_to(ROOT.resolve()) if work.resolve().is_relative_to(ROOT) else work}"
+
+
 def package(args, cell: dict, report: dict) -> Path:
     """Ship the cell's final checkpoint as the package's policy for its task, with the numbers it earned."""
     from lano3dp.data.store import EpisodeStore
@@ -209,7 +217,7 @@ def package(args, cell: dict, report: dict) -> Path:
               "made_by": f"OMP_NUM_THREADS=1 python bench/bench_learning.py --tasks {cell['task']} --recipes "
                          f"{cell['recipe']} --seeds {cell['seed']} --demos {args.demos} --minutes "
                          f"{cell['cpu_minutes_budget'] or args.minutes:g} --checkpoints {len(cell['curve'])} "
-                         f"--episodes {cell['final']['episodes']}",
+                         f"--episodes {cell['final']['episodes']}" + work_option(args.work),
               "packaged_by": report["command"], "when_utc": report["when_utc"]}
     return export_fp16(final, PACKAGED_ROOT / cell["task"], record=record)
 

@@ -35,7 +35,7 @@ from lano3dp.evaluate import EvalConfig, write_json
 from lano3dp.pipeline import collect_stage, eval_stage, train_stage
 from lano3dp.policy.checkpoint import list_checkpoints
 from lano3dp.report import wilson_interval
-from lano3dp.train import policy_config_for_dataset
+from lano3dp.train import checkpoint_progress, policy_config_for_dataset
 
 ROOT = Path(__file__).resolve().parent.parent
 PAPER_TASKS = ("open_drawer", "open_wine_bottle", "sweep_to_dustpan", "phone_on_base", "put_item_in_drawer",
@@ -105,7 +105,7 @@ def collect_report(args, tasks, recipes, seeds) -> dict:
                     if not path.exists():
                         continue
                     summary = json.loads(path.read_text())["summary"]
-                    progress = json.loads((folder / "progress.json").read_text())
+                    progress = checkpoint_progress(folder)
                     successes = round(summary["success_rate"] * summary["episodes"])
                     low, high = wilson_interval(successes, summary["episodes"])
                     curve.append({"step": step, "cpu_minutes": round(progress["cpu_s"] / 60, 2),
@@ -197,7 +197,7 @@ def package(args, cell: dict, report: dict) -> Path:
     """Ship the cell's final checkpoint as the package's policy for its task, with the numbers it earned."""
     from lano3dp.data.store import EpisodeStore
     from lano3dp.policy.pretrained import PACKAGED_ROOT, export_fp16
-    from lano3dp.train import OBSERVATION_ATTRS
+    from lano3dp.train import observation_settings
 
     run = args.work / "runs" / f"{cell['task']}_{cell['recipe']}_seed{cell['seed']}"
     final = dict(list_checkpoints(run / "checkpoints"))[cell["final"]["step"]]
@@ -205,7 +205,7 @@ def package(args, cell: dict, report: dict) -> Path:
     config = json.loads(config_path.read_text())
     if "observation" not in config["extra"]:  # trained before checkpoints carried it: take it from the dataset
         attrs = EpisodeStore.open(json.loads((run / "train_config.json").read_text())["data"]).attrs
-        config["extra"]["observation"] = {key: attrs[key] for key in OBSERVATION_ATTRS if key in attrs}
+        config["extra"]["observation"] = observation_settings(attrs)
         config_path.write_text(json.dumps(config, indent=2, sort_keys=True) + "\n")
     record = {"task": cell["task"], "recipe": cell["recipe"], "training_seed": cell["seed"], "demos": args.demos,
               "steps": cell["final"]["step"], "cpu_minutes": cell["final"]["cpu_minutes"],

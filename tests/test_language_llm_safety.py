@@ -272,6 +272,6 @@ def test_a_skill_the_rules_read_differently_is_kept_with_a_warning(llama):
 
 
 def test_model_text_is_data_never_code(llama):
-    llama.script = [dict(RIGHT, code="__import__('os').system('touch /tmp/pwned')"), RIGHT]
+    llama.script = [dict(RIGHT, code="__import__('os').system('touch pwned')"), RIGHT]
     outcome = llm(llama).decompose_with_report(INSTRUCTION)
     assert outcome.source == "llm_retry" and "code: Extra inputs are not permitted" in outcome.errors[0]

@@ -176,6 +176,18 @@ class TrainConfig:
 
 # Dataset attributes that say how an observation is made (camera resolution, crop box, points, rate).
 OBSERVATION_ATTRS = ("image_size", "crop_low", "crop_high", "n_points", "scene_points", "control_hz")
+PROGRESS_NAME = "progress.json"  # in every checkpoint: its step and the run's CPU seconds so far
+
+
+def observation_settings(attrs: dict) -> dict:
+    """The dataset attributes a checkpoint carries in config.extra["observation"]."""
+    return {key: attrs[key] for key in OBSERVATION_ATTRS if key in attrs}
+
+
+def checkpoint_progress(checkpoint: Path) -> dict:
+    """A checkpoint's progress.json ({"step", "cpu_s", "stopped_by_budget"}), or {} if it has none."""
+    path = Path(checkpoint) / PROGRESS_NAME
+    return json.loads(path.read_text()) if path.exists() else {}
 
 
 def policy_config_for_dataset(data: str | Path, **overrides) -> PolicyConfig:
@@ -194,13 +206,13 @@ def policy_config_for_dataset(data: str | Path, **overrides) -> PolicyConfig:
         fields["image_size"] = shapes["rgb"][0]
     fields["extra"] = {key: store.attrs[key] for key in ("skill", "task") if key in store.attrs}
     # How the observations were made travels with the policy, so a checkpoint acts without its dataset.
-    fields["extra"]["observation"] = {key: store.attrs[key] for key in OBSERVATION_ATTRS if key in store.attrs}
+    fields["extra"]["observation"] = observation_settings(store.attrs)
     return PolicyConfig(**(fields | overrides))
 
 
 def load_training_state_step(checkpoint: Path) -> int | str:
     try:
-        return int(json.loads((checkpoint / "progress.json").read_text())["step"])
+        return int(json.loads((checkpoint / PROGRESS_NAME).read_text())["step"])
     except (OSError, ValueError, KeyError):
         return checkpoint.name
 
@@ -553,7 +565,7 @@ class Trainer:
                                        "cpu_s": round(self.cpu_seconds, 3)})
             (folder / "train_config.json").write_text(self.config.to_json() + "\n")
             # what this checkpoint cost; the training state holding the same number is pruned from older ones
-            (folder / "progress.json").write_text(json.dumps({"step": self.step, "cpu_s": round(self.cpu_seconds, 3),
+            (folder / PROGRESS_NAME).write_text(json.dumps({"step": self.step, "cpu_s": round(self.cpu_seconds, 3),
                                                               "stopped_by_budget": self.stopped_by_budget}) + "\n")
         update_last_pointer(self.checkpoints, final.name)
         prune_training_states(self.checkpoints, self.config.keep_training_states)

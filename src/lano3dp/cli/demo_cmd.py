@@ -71,8 +71,9 @@ DEFAULT_STEPS_TO_LEARN = 4000
 
 def training_warnings(train_config: dict, checkpoint: Path) -> list[str]:
     """Plain sentences for a policy that got fewer steps than planned, or than its task needs."""
-    progress_path = checkpoint / "progress.json"
-    progress = json.loads(progress_path.read_text()) if progress_path.exists() else {}
+    from lano3dp.train import checkpoint_progress
+
+    progress = checkpoint_progress(checkpoint)
     done, planned = int(progress.get("step", train_config["steps"])), int(train_config["steps"])
     task = (train_config.get("policy") or {}).get("extra", {}).get("task")
     needed = STEPS_TO_LEARN.get(task, DEFAULT_STEPS_TO_LEARN)
@@ -188,6 +189,7 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
     from lano3dp.data.store import EpisodeStore
     from lano3dp.policy.modeling import load_config
     from lano3dp.report import centimetres, markdown_table, percent, plot_rates, plot_top_view, wilson_interval
+    from lano3dp.train import checkpoint_progress
 
     # the report reads the checkpoint's files rather than rebuilding the model, so it can be re-made for any
     # checkpoint the evaluations used, even one an older version of the code wrote
@@ -196,8 +198,7 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         parameters = sum(math.prod(weights.get_slice(name).get_shape())
                          for name in weights.keys() if not name.startswith("normalizer."))
     train_config = json.loads((checkpoint / "train_config.json").read_text())
-    progress_path = checkpoint / "progress.json"
-    progress = json.loads(progress_path.read_text()) if progress_path.exists() else {}
+    progress = checkpoint_progress(checkpoint)
     steps_done = int(progress.get("step", train_config["steps"]))
     cpu_minutes = float(progress.get("cpu_s", 0.0)) / 60
     store = EpisodeStore.open(train_config["data"])

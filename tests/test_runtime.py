@@ -190,7 +190,7 @@ def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(obser
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
     assert scene_obstacles(frame) == ["obstacle_0"]
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(margin=0.02)),
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(margin=0.02, body="sphere")),
                           obstacle_phrases=["obstacle_0"], held_object="bowl")
     runner.push(frame, state)
     (cylinder,) = list(runner.obstacles)
@@ -203,7 +203,7 @@ def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(obser
     assert 0.09 <= runner.held_radius <= 0.15
     assert cylinder.safety_distance == pytest.approx(cylinder.radius + runner.held_radius + 0.02)
 
-    fixed = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(held_radius=0.05)),
+    fixed = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.05)),
                          obstacle_phrases=["obstacle_0"])
     fixed.push(frame, state)
     assert fixed.held_radius == 0.05
@@ -214,7 +214,7 @@ def test_a_target_that_is_not_carried_leaves_only_the_gripper_in_q_star(observer
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(gripper_radius=0.02)),
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(body="sphere", gripper_radius=0.02)),
                           obstacle_phrases=["obstacle_0"])
     runner.push(frame, state)
     assert runner.held_object is None and runner.held_radius == 0.02
@@ -241,7 +241,7 @@ def test_the_cost_can_be_densified_and_pushed_isotropically_in_metres(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
-    config = RuntimeConfig(obstacle=ObstacleModel(held_radius=0.03), metric_gradient=True, densify=4)
+    config = RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.03), metric_gradient=True, densify=4)
     runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
     runner.push(frame, state)
     cost = runner.obstacle_cost
@@ -259,7 +259,7 @@ def test_the_cost_can_be_densified_and_pushed_isotropically_in_metres(observer):
 def test_guidance_reaches_the_policy_only_with_obstacles_and_bends_the_path_clear(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     guidance = GuidanceConfig(mode="clean", scale=1.0, last_steps=10)
-    model = ObstacleModel(held_radius=0.03, margin=0.02)
+    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
 
     plain_policy = FakePolicy()
     plain = rollout(env, PolicyRunner(plain_policy, observer, RuntimeConfig(obstacle=model),
@@ -285,7 +285,7 @@ def test_guidance_reaches_the_policy_only_with_obstacles_and_bends_the_path_clea
 def test_checked_execution_resamples_with_guidance_until_the_chunk_is_clear(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     policy = FakePolicy()
-    config = RuntimeConfig(obstacle=ObstacleModel(held_radius=0.03), checked=CheckConfig(initial_scale=1.0))
+    config = RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.03), checked=CheckConfig(initial_scale=1.0))
     result = rollout(env, PolicyRunner(policy, observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
     assert not result.collided
     assert max(result.chunk_tries) >= 2  # the straight line hit the obstacle at least once
@@ -295,7 +295,7 @@ def test_checked_execution_resamples_with_guidance_until_the_chunk_is_clear(obse
 
 def test_checked_execution_can_stop_an_episode_that_cannot_be_cleared(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
-    config = RuntimeConfig(obstacle=ObstacleModel(held_radius=0.03), on_unclear="stop",
+    config = RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.03), on_unclear="stop",
                            checked=CheckConfig(initial_scale=1e-6, max_tries=2, growth=1.0))
     result = rollout(env, PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
     assert not result.success

@@ -5,6 +5,7 @@ import pytest
 
 from lano3dp.perception import ObjectObserver, SimOracleSegmenter
 from lano3dp.sim import TabletopEnv
+from lano3dp.sim.robot import GRIPPER_FOOTPRINT_RADIUS
 from lano3dp.sim.variations import Variation, VariationError, distance_to_polyline
 
 SEED = 4
@@ -111,6 +112,26 @@ def test_obstacle_stands_on_the_expert_path_and_never_in_clean_scenes(env):
         for name in ("bowl", "pan"):
             gap = np.linalg.norm(info.position[:2] - env.sim.body_position(name)[:2])
             assert gap > env.objects[name].footprint_radius
+        # and out of the open hand's reach where the carry starts and ends (grasp, release)
+        for end in (region[0, :2], region[-1, :2]):
+            assert np.linalg.norm(info.position[:2] - end) >= GRIPPER_FOOTPRINT_RADIUS + info.footprint_radius
+
+
+def test_obstacles_leave_the_grasp_of_a_pick_and_place_reachable():
+    """An obstacle beside the block blocks the palm as it closes on the block: no detour can avoid it."""
+    environment = TabletopEnv("put_item_in_drawer", image_size=64)
+    try:
+        placed = 0
+        for seed in range(12):
+            environment.reset(seed=seed, options={"variation": "obstacle"})
+            region = environment.task.obstacle_region(environment.episode.layout)
+            for info in (i for i in environment.objects.values() if i.role == "obstacle"):
+                placed += 1
+                for end in (region[0, :2], region[-1, :2]):
+                    assert np.linalg.norm(info.position[:2] - end) >= GRIPPER_FOOTPRINT_RADIUS + info.footprint_radius
+        assert placed >= 6  # most layouts still have room on the carry
+    finally:
+        environment.close()
 
 
 def test_the_expert_hits_an_obstacle_and_the_env_reports_it(env):

@@ -19,6 +19,9 @@ TASKS = ("open_drawer", "bottle_in_drawer", "close_microwave", "put_item_in_draw
 # The handle is within reach of the start: the cabinet's and the door's footprints leave no room for an
 # obstacle between them and the gripper's start footprint.
 NO_OBSTACLE_ROOM = ("open_drawer", "close_microwave")
+# A short carry from the bottle to the drawer: with the hand's reach kept free at the grasp and the release,
+# about a third of the layouts leave room (41 of 100 seeds); an evaluation picks seeds that have one.
+SHORT_CARRY = ("bottle_in_drawer",)
 # Size measure per slot: the axis of the object's own bounding box that scales with the instance
 # (heights of cabinet, box, bottles, block, can and plant scale exactly; the thickness of the phone,
 # the base, the broom and the dustpan's walls does not, their length does).
@@ -183,7 +186,7 @@ def test_obstacle_variation_finds_room_on_the_expert_path_in_most_layouts(task):
     if task in NO_OBSTACLE_ROOM:
         assert placed <= 3, f"{task}: {placed}/20 layouts now have room; move it out of NO_OBSTACLE_ROOM"
     else:
-        assert placed >= 9, f"{task}: an obstacle found room in only {placed}/20 layouts"
+        assert placed >= (6 if task in SHORT_CARRY else 9), f"{task}: an obstacle found room in only {placed}/20 layouts"
 
 
 @pytest.mark.parametrize("task", TASKS)

@@ -71,6 +71,8 @@ class EvalConfig:
         scheduler, steps: inference scheduler and its number of denoising steps (None: the policy's default).
         checked: checked execution (re-sample with a larger rho while the executed part collides).
         margin, held_radius: obstacle model; held_radius None measures it from the held object's cloud.
+        body: what guidance keeps clear: "swept" (hand and held object as balls re-measured every chunk) or
+            "sphere" (the paper: one ball of held_radius round the EE point); see `runtime.ObstacleModel`.
         n_action_steps: actions executed per chunk (None: the policy's).
         max_steps: episode step limit (None: the task's).
         image_size: camera resolution (None: the dataset's).
@@ -111,6 +113,7 @@ class EvalConfig:
     detector: str = "grounding_dino"
     detector_dir: str | None = None
     sam_dir: str | None = None
+    body: str = "swept"
 
     def __post_init__(self):
         self.checkpoint = str(self.checkpoint)
@@ -119,6 +122,10 @@ class EvalConfig:
         if self.guidance not in ("none", "noisy", "clean"):
             raise ValueError(f"guidance must be 'none', 'noisy' or 'clean', got {self.guidance!r}")
         check_segmenter_choice(self.segmenter)
+        if self.body not in ("swept", "sphere"):
+            raise ValueError(f"body must be 'swept' or 'sphere', got {self.body!r}")
+        if self.held_radius is not None and self.body != "sphere":
+            raise ValueError("a fixed held radius sizes the 'sphere' body model; add body='sphere' (--body sphere)")
 
 
 SEGMENTERS = {"sim": "oracle", "open-vocab": "open_vocab"}  # option value -> perception.factory kind
@@ -212,7 +219,7 @@ def runtime_config(config: EvalConfig, seed: int):
     return RuntimeConfig(
         guidance=guidance_config(config), scheduler=config.scheduler, num_inference_steps=config.steps,
         n_action_steps=config.n_action_steps,
-        obstacle=ObstacleModel(margin=config.margin, held_radius=config.held_radius),
+        obstacle=ObstacleModel(margin=config.margin, body=config.body, held_radius=config.held_radius),
         checked=CheckConfig(initial_scale=max(config.rho, 1e-3), densify=config.densify) if config.checked else None,
         metric_gradient=config.metric_gradient, densify=config.densify, seed=seed)
 
@@ -381,6 +388,8 @@ def summarize(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 # Fields that change how an evaluation runs, not what it measures: every episode is seeded by itself.
 EVAL_FIELDS_NOT_MEASURED = ("workers",)
+# What results saved before a field existed were made with, where that is not the field's default.
+EVAL_FIELDS_BEFORE = {"body": "sphere"}
 EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
 
 

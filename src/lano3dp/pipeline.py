@@ -162,6 +162,7 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
 # ---- evaluate --------------------------------------------------------------------------------------
 def cached_eval(config) -> dict[str, Any] | None:
     """The results in `config.out` if they were made with this EvalConfig (up to the worker count), else None."""
+    from lano3dp.evaluate import EVAL_FIELDS_BEFORE
     from lano3dp.evaluate import EVAL_FIELDS_NOT_MEASURED as _EVAL_FIELDS_NOT_MEASURED
 
     if config.out and Path(config.out).exists():
@@ -171,7 +172,7 @@ def cached_eval(config) -> dict[str, Any] | None:
         # results saved before a field existed were made with its default (e.g. segmenter "sim")
         for field in fields(config):
             if field.name not in made and field.default is not MISSING:
-                made[field.name] = json.loads(json.dumps(field.default))
+                made[field.name] = json.loads(json.dumps(EVAL_FIELDS_BEFORE.get(field.name, field.default)))
         for name in _EVAL_FIELDS_NOT_MEASURED:
             wanted.pop(name, None)
             made.pop(name, None)

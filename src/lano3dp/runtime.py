@@ -33,14 +33,24 @@ from typing import Any
 import numpy as np
 import torch
 
-from lano3dp.errors import Lano3dpError
+from lano3dp.errors import EmptyCloudError, Lano3dpError
 from lano3dp.geometry.frame import RGBDFrame
 from lano3dp.guidance.checked import CheckConfig, checked_sample
-from lano3dp.guidance.costs import Densified, MetricGradient, ObstacleSet, PointCloudObstacle, PositionCost
+from lano3dp.guidance.costs import (
+    Densified,
+    MetricGradient,
+    ObstacleSet,
+    PointCloudObstacle,
+    PositionCost,
+    SweptBody,
+)
 from lano3dp.guidance.fitting import fit_box, fit_cylinder
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
+from lano3dp.perception.exceptions import PerceptionError
 
 OBSTACLE_SHAPES = ("cylinder", "box", "points")
+BODY_MODELS = ("swept", "sphere")
+GRASP_FLAG = 10  # index of the grasp flag in the 11-D robot state
 
 
 class ClosedLoopError(Lano3dpError, RuntimeError):
@@ -55,12 +65,18 @@ class ObstacleModel:
         shape: "cylinder" (the paper: vertical cylinder, xy hinge), "box" (yaw-oriented box) or
             "points" (nearest segmented point).
         margin: metres beyond contact at which the cost starts pushing (part of Q*).
-        held_radius: metres around the EE point that must stay clear (gripper + held object). None: measure
-            it from the held object's cloud (`held_object` of the runner) as `held_extent` x its fitted radius.
-        held_extent: multiple of the held object's fitted radius; 2.0 = its diameter (the paper's choice, as a
-            rim grasp puts the object's far side a diameter away from the EE).
-        gripper_radius: lower bound of the held radius (m): the open hand's half-span about the EE axis (the
-            simulator's palm is 13 cm wide; with 2 cm, the fingers alone, the palm hit obstacles the EE cleared).
+        body: what must stay clear. "swept" (default, beyond the paper): the hand as a row of balls along the
+            EE's finger axis, plus, while the state's grasp flag is set, the held object as a ball at its fitted
+            centre; re-measured before every chunk (`guidance.costs.SweptBody`). "sphere" (the paper): one ball of
+            `held_radius` round the EE point for the whole episode.
+        held_radius: ("sphere") metres around the EE point that must stay clear (gripper + held object). None:
+            measure it from the held object's cloud (`held_object` of the runner) as `held_extent` x its radius.
+        held_extent: ("sphere") multiple of the held object's fitted radius; 2.0 = its diameter (the paper's
+            choice, as a rim grasp puts the object's far side a diameter away from the EE).
+        gripper_radius: ("sphere") lower bound of the held radius (m): the open hand's half-span about the EE
+            axis (the simulator's palm is 13 cm wide; with 2 cm, the fingers alone, the palm hit obstacles).
+        hand_half_span, hand_radius: ("swept") the hand's half length along the EE y (finger) axis and its
+            half thickness, m; the defaults cover the simulator's 13 x 4 cm palm and its fingers.
         xy_only: measure distances in the horizontal plane only (the paper's setting).
         refit_every_chunk: re-segment and re-fit obstacles before every chunk (moving obstacles); by default
             they are fitted once, on the first frame of the episode, before the arm can occlude them.
@@ -68,19 +84,39 @@ class ObstacleModel:
 
     shape: str = "cylinder"
     margin: float = 0.02
+    body: str = "swept"
     held_radius: float | None = None
     held_extent: float = 2.0
     gripper_radius: float = 0.07
+    hand_half_span: float = 0.065
+    hand_radius: float = 0.025
     xy_only: bool = True
     refit_every_chunk: bool = False
 
     def __post_init__(self):
         if self.shape not in OBSTACLE_SHAPES:
             raise ValueError(f"obstacle shape must be one of {OBSTACLE_SHAPES}, got {self.shape!r}")
+        if self.body not in BODY_MODELS:
+            raise ValueError(f"obstacle body model must be one of {BODY_MODELS}, got {self.body!r}")
+        if self.body == "swept" and self.held_radius is not None:
+            raise ValueError("held_radius sizes the 'sphere' body model; the 'swept' body measures the hand and "
+                             "the held object itself (pass body='sphere' to fix a radius)")
+        if not 0 < self.hand_radius <= self.hand_half_span:
+            raise ValueError(f"need 0 < hand_radius <= hand_half_span, got {self.hand_radius}, {self.hand_half_span}")
         if self.margin < 0 or self.gripper_radius < 0 or self.held_extent < 0:
             raise ValueError(f"margin, gripper_radius and held_extent must be >= 0 in {self}")
         if self.held_radius is not None and self.held_radius < 0:
             raise ValueError(f"held_radius must be >= 0, got {self.held_radius}")
+
+    def hand_balls(self, rotation6d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(K, 3) world offsets and (K,) radii of the hand's balls for an EE rotation (6D: x then y column)."""
+        finger_axis = np.asarray(rotation6d[3:6], dtype=np.float64)
+        finger_axis = finger_axis / max(np.linalg.norm(finger_axis), 1e-9)
+        reach = self.hand_half_span - self.hand_radius
+        # balls 2 cm apart at most, so the hand's outline between two of them dips by a few mm only
+        count = 2 * int(np.ceil(reach / 0.02)) + 1
+        along = np.linspace(-reach, reach, count)
+        return along[:, None] * finger_axis, np.full(count, self.hand_radius)
 
     def fit(self, points: np.ndarray, held_radius: float) -> PositionCost:
         """(N, 3) world-frame obstacle points -> a cost whose safety distance includes `held_radius` (m)."""
@@ -274,6 +310,7 @@ class PolicyRunner:
         self.step_count = 0
         self.held_clouds = 0  # frames in which a hidden target kept its previous cloud
         self._last_clouds: np.ndarray | None = None
+        self._held_ball: tuple[np.ndarray, float] | None = None  # (offset from the EE, radius) of the held object
         self.initial_targets: dict[str, list[float]] = {}  # phrase -> centroid (m) in the first frame
         self.stopped_reason: str | None = None
         self.generator = torch.Generator().manual_seed(self.config.seed)
@@ -290,6 +327,7 @@ class PolicyRunner:
         self.step_count = 0
         self.held_clouds = 0
         self._last_clouds = None
+        self._held_ball = None
         self.initial_targets = {}
         self.stopped_reason = None
         self.generator = torch.Generator().manual_seed(self.config.seed if seed is None else int(seed))
@@ -334,8 +372,6 @@ class PolicyRunner:
         previous cloud, as a video tracker would and as the demonstrations were recorded
         (`data.collect`); a target missing from the first frame is an error the caller sees.
         """
-        from lano3dp.perception.exceptions import PerceptionError
-
         try:
             clouds = self.observer.observe(frame, self.target_phrases).points
         except PerceptionError:
@@ -356,12 +392,19 @@ class PolicyRunner:
         return clouds
 
     def push(self, frame: RGBDFrame, state: np.ndarray) -> None:
-        """Add one observation (frame, state (11,)) to the window; the first one also fits the obstacles."""
+        """Add one observation (frame, state (11,)) to the window; the first one also fits the obstacles,
+        and before each chunk the swept body is re-measured."""
         visual = np.asarray(self.visual_fn(frame))
-        self.history.append({"visual": visual, "state": np.asarray(state, dtype=np.float32)})
-        if self.obstacle_phrases and (self.obstacle_cost is None or
-                                      (self.config.obstacle.refit_every_chunk and not self.queue)):
-            self.obstacle_cost = self.fit_obstacles(frame)
+        state = np.asarray(state, dtype=np.float32)
+        self.history.append({"visual": visual, "state": state})
+        if not self.obstacle_phrases:
+            return
+        model, planning = self.config.obstacle, not self.queue
+        if self.obstacles is None or (model.refit_every_chunk and planning):
+            self.obstacles = self.fit_obstacles(frame)
+            self.obstacle_cost = None
+        if self.obstacle_cost is None or (model.body == "swept" and planning):
+            self.obstacle_cost = self.guidance_cost(frame, state)
 
     def policy_obs(self) -> dict[str, np.ndarray]:
         """The window as the policy's obs dict: {visual key: (1, To, ...), "state": (1, To, 11)}.
@@ -390,14 +433,44 @@ class PolicyRunner:
         radius = fit_cylinder(points).radius
         return max(model.gripper_radius, model.held_extent * radius)
 
-    def fit_obstacles(self, frame: RGBDFrame) -> PositionCost:
-        """Segment every obstacle phrase in `frame` and fit its cost (see ObstacleModel)."""
-        self.held_radius = self.measure_held_radius(frame)
+    def fit_obstacles(self, frame: RGBDFrame) -> ObstacleSet:
+        """Segment every obstacle phrase in `frame` and fit its shape (see ObstacleModel). With the "sphere"
+        body the shapes carry the held radius; with "swept" they are bare and `guidance_cost` adds the body."""
+        sphere = self.config.obstacle.body == "sphere"
+        if sphere:
+            self.held_radius = self.measure_held_radius(frame)
         # Every matching instance is its own obstacle: "avoid the mugs" fits one cylinder per mug.
         clouds = self.observer.observe_instances(frame, self.obstacle_phrases)
-        costs = [self.config.obstacle.fit(points, self.held_radius) for points in clouds.points]
-        self.obstacles = ObstacleSet(costs)
+        return ObstacleSet([self.config.obstacle.fit(points, self.held_radius if sphere else 0.0)
+                            for points in clouds.points])
+
+    def swept_body(self, frame: RGBDFrame, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(K, 3) world offsets from the EE point and (K,) radii of what moves with it now: the hand, and
+        the held object while the grasp flag is set (its last seen ball when the hand hides it)."""
+        offsets, radii = self.config.obstacle.hand_balls(state[3:9])
+        if not self.held_object or state[GRASP_FLAG] < 0.5:
+            self._held_ball = None
+            return offsets, radii
+        try:
+            held = fit_cylinder(self.observer.observe(frame, [self.held_object]).points[0])
+            offset = np.array([*held.center.tolist(), (held.z_min + held.z_max) / 2]) - state[:3]
+            # a flag set while the named object is nowhere near the hand (another object is held, or the
+            # env's flag is stale) must not drag a ball across the table with the hand
+            if np.linalg.norm(offset) - held.radius <= self.config.obstacle.hand_half_span:
+                self._held_ball = (offset, held.radius)
+        except (PerceptionError, EmptyCloudError):
+            pass  # keep the ball measured before the hand covered the object
+        if self._held_ball is None:
+            return offsets, radii
+        return np.vstack([offsets, self._held_ball[0]]), np.append(radii, self._held_ball[1])
+
+    def guidance_cost(self, frame: RGBDFrame, state: np.ndarray) -> PositionCost:
+        """The cost guidance descends for the next chunk: the fitted obstacles against the body model."""
         cost: PositionCost = self.obstacles
+        if self.config.obstacle.body == "swept":
+            offsets, radii = self.swept_body(frame, state)
+            cost = ObstacleSet([SweptBody(obstacle, offsets, radii) for obstacle in self.obstacles])
+            self.held_radius = cost.obstacles[0].reach
         if self.config.densify > 1:
             cost = Densified(cost, self.config.densify)
         if self.config.metric_gradient:

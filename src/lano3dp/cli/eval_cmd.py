@@ -38,7 +38,10 @@ def eval_command(
     steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
     checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
     margin: float = typer.Option(0.02, help="Safety margin (m) beyond contact, part of Q*."),
-    held_radius: float = typer.Option(None, help="Held-object extent (m) in Q*; default: measured from its cloud."),
+    body: str = typer.Option("swept", help="What guidance keeps clear: swept (hand + held object, re-measured "
+                                          "every chunk) | sphere (the paper: one ball round the EE point)."),
+    held_radius: float = typer.Option(None, help="--body sphere: its radius (m) in Q*; default: measured from the "
+                                                 "held object's cloud."),
     max_steps: int = typer.Option(None, min=1, help="Episode step limit (default: the task's)."),
     workers: int = typer.Option(1, min=1, help="Parallel episode processes (1 torch thread each)."),
     video_dir: Path = typer.Option(None, help="Write MP4s of the first --n-videos episodes here."),
@@ -64,6 +67,10 @@ def eval_command(
     _options.variation(variation)
     _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
     _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
+    _options.choice(body, ("swept", "sphere"), "--body")
+    if held_radius is not None and body != "sphere":
+        raise typer.BadParameter("a fixed held radius sizes the sphere body model; add --body sphere",
+                                 param_hint="--held-radius")
     _options.segmenter(segmenter, detector, detector_dir, sam_dir)
     _options.existing_path(checkpoint, "--checkpoint")
     _options.output_path(out, folder=False)
@@ -78,7 +85,7 @@ def eval_command(
         obstacles=list(obstacles) if obstacles else None, guidance=guidance, rho=rho, last_steps=last_steps,
         per_train_step=per_train_step, metric_gradient=metric_push, densify=densify, scheduler=scheduler, steps=steps,
         checked=checked, margin=margin,
-        held_radius=held_radius, max_steps=max_steps, workers=workers,
+        body=body, held_radius=held_radius, max_steps=max_steps, workers=workers,
         video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out),
         segmenter=segmenter, detector=detector, detector_dir=str(detector_dir) if detector_dir else None,
         sam_dir=str(sam_dir) if sam_dir else None)

@@ -11,6 +11,7 @@ from lano3dp.guidance.costs import (
     PointCloudObstacle,
     PositionCost,
     Sphere,
+    SweptBody,
     densify,
     min_clearance,
 )
@@ -21,5 +22,5 @@ from lano3dp.guidance.sampler import DenoiseStep, GuidanceConfig, GuidanceMode, 
 __all__ = [
     "CheckConfig", "CheckedResult", "CollisionError", "Cylinder", "DenoiseStep", "Densified", "GuidanceConfig",
     "GuidanceError", "GuidanceMode", "MetricGradient", "Obstacle", "ObstacleSet", "OrientedBox", "PointCloudObstacle",
-    "PositionCost", "Sphere", "checked_sample", "denoise", "densify", "fit_box", "fit_cylinder", "min_clearance",
+    "PositionCost", "Sphere", "SweptBody", "checked_sample", "denoise", "densify", "fit_box", "fit_cylinder", "min_clearance",
 ]

@@ -277,6 +277,56 @@ class ObstacleSet:
         return f"ObstacleSet({self.obstacles!r})"
 
 
+class SweptBody:
+    """An obstacle cost on everything that moves with the end effector, not on the EE point alone.
+
+    The body is a few balls rigidly offset from the EE point (the hand's span, the held object's
+    centre), each with its own radius. Every waypoint carries the whole body, so the cost sees the
+    volume the body sweeps along the path: a bowl held by its rim is pushed clear on the side it
+    hangs, instead of a ball of its diameter round the EE pushing the EE away on every side (which
+    kept a guided bowl ~19 cm from the obstacle's axis and out of reach of a pan beside it).
+
+    The offsets are world-frame and fixed over one chunk (the runner re-measures them before each
+    chunk from the current EE rotation and the held object's cloud), so a rotation inside one chunk
+    is not modelled.
+
+    Args:
+        obstacle: the bare obstacle (held_radius 0): its clearance is the distance to its surface.
+        offsets: (K, 3) ball centres relative to the EE point, world axes, m.
+        radii: (K,) ball radii, m.
+        margin: distance (m) beyond contact at which the cost starts pushing; default the obstacle's.
+    """
+
+    def __init__(self, obstacle: PositionCost, offsets, radii, *, margin: float | None = None):
+        offsets = torch.as_tensor(np.asarray(offsets, dtype=np.float64).reshape(-1, 3))
+        radii = torch.as_tensor(np.asarray(radii, dtype=np.float64).reshape(-1))
+        if len(offsets) == 0 or len(offsets) != len(radii) or bool((radii < 0).any()):
+            raise ValueError(f"SweptBody needs K offsets (K, 3) and K radii >= 0, got {tuple(offsets.shape)}, "
+                             f"{tuple(radii.shape)}")
+        self.obstacle, self.offsets, self.radii = obstacle, offsets, radii
+        self.margin = float(getattr(obstacle, "margin", 0.02) if margin is None else margin)
+
+    @property
+    def reach(self) -> float:
+        """Farthest body surface from the EE point (m): the radius of the ball the older model used."""
+        return float((self.offsets.norm(dim=-1) + self.radii).max())
+
+    def clearance(self, positions: torch.Tensor) -> torch.Tensor:
+        """(B, T, 3) EE positions -> (B, T) smallest gap (m) of any body ball to the obstacle."""
+        _check_positions(positions)
+        batch, steps, _ = positions.shape
+        carried = positions[:, :, None, :] + self.offsets.to(positions)  # (B, T, K, 3)
+        gaps = self.obstacle.clearance(carried.reshape(batch, -1, 3)).reshape(batch, steps, -1)
+        return (gaps - self.radii.to(positions)).min(-1).values
+
+    def __call__(self, positions: torch.Tensor) -> torch.Tensor:
+        # The nearest ball alone is pushed, so a body of many balls is pushed as hard as one point.
+        return torch.relu(self.margin - self.clearance(positions)).sum(-1)
+
+    def __repr__(self):
+        return f"SweptBody({self.obstacle!r}, {len(self.radii)} balls, reach={self.reach:.3f})"
+
+
 def densify(positions: torch.Tensor, factor: int) -> torch.Tensor:
     """Linearly interpolate `factor - 1` points inside every segment.
 

@@ -1,5 +1,6 @@
 """Each variation axis changes what it claims, and only that; axes combine."""
 
+import mujoco
 import numpy as np
 import pytest
 
@@ -153,3 +154,37 @@ def test_axes_combine(env):
     present = set(roles(env).values())
     assert {"distractor", "similar", "obstacle", "target"} <= present
     assert env.episode.extras.camera.position != (1.18, 0.0, 0.70)
+
+
+def test_obstacle_modifiers_make_boxes_clusters_several_and_moving_obstacles(env):
+    assert Variation.parse("obstacle").name == "obstacle"  # the paper's single cylinder stays the default
+    assert Variation.parse("clutter+obstacle:box:moving").name == "clutter+obstacle:box:moving"
+    with pytest.raises(VariationError, match="modifier"):
+        Variation.parse("obstacle:cone")
+
+    def obstacles():
+        return [(name, info) for name, info in env.objects.items() if info.role == "obstacle"]
+
+    env.reset(seed=1, options={"variation": "obstacle:box"})
+    ((name, info),) = obstacles()
+    assert info.kind == "box" and env.model.geom(f"{name}/box").type == mujoco.mjtGeom.mjGEOM_BOX
+
+    mates = []
+    for seed in range(6):
+        env.reset(seed=seed, options={"variation": "obstacle:cluster"})
+        if len(pair := obstacles()) == 2:
+            (_, a), (_, b) = pair
+            mates.append(np.linalg.norm(a.position[:2] - b.position[:2]) - a.footprint_radius - b.footprint_radius)
+    assert mates and max(mates) <= 0.015 + 1e-9  # closer than the 4 cm thick hand: no way between them
+
+    env.reset(seed=0, options={"variation": "obstacle:2"})
+    assert len(obstacles()) == 2
+
+    obs, _ = env.reset(seed=3, options={"variation": "obstacle:moving"})
+    ((name, _),) = obstacles()
+    track = []
+    for _ in range(40):
+        obs, *_ = env.step(np.concatenate([obs["state"][:9], [1.0]]))
+        track.append(env.data.xpos[env.model.body(name).id][:2].copy())
+    speeds = np.linalg.norm(np.diff(track, axis=0), axis=1) * env.control_hz
+    assert 0.02 < speeds.max() <= 0.05  # it moves, and no faster than 5 cm/s

@@ -183,9 +183,14 @@ class TabletopEnv(gym.Env):
         builder = SceneBuilder(extras.style, self.gripper_spec, max_image_size=max(self.height, self.width))
         self.task.build(builder, layout)
         for extra in extras.objects:
-            if extra.role == "obstacle":
-                primitives.add_cylinder_obstacle(builder, extra.name, extra.position, radius=extra.radius,
-                                                 height=extra.height, color=extra.color)
+            if extra.role == "obstacle" and extra.kind == "box":
+                primitives.add_box_obstacle(builder, extra.name, extra.position_at(0.0), extra.half_extents,
+                                            extra.yaw, height=extra.height, color=extra.color,
+                                            moving=extra.motion is not None)
+            elif extra.role == "obstacle":
+                primitives.add_cylinder_obstacle(builder, extra.name, extra.position_at(0.0), radius=extra.radius,
+                                                 height=extra.height, color=extra.color,
+                                                 moving=extra.motion is not None)
             else:
                 primitives.add_object(builder, extra.kind, extra.name, extra.position, yaw=extra.yaw,
                                       color=extra.color, scale=extra.scale, role=extra.role)
@@ -211,6 +216,9 @@ class TabletopEnv(gym.Env):
                            for i in self.instance_names[n]]
         self._obstacle_geoms = np.flatnonzero(np.isin(model.geom_bodyid, obstacle_bodies))
         self._robot_geoms = np.flatnonzero(np.isin(model.geom_bodyid, self.gripper.body_ids))
+        # moving obstacles are mocap bodies, slid along their swing in step()
+        self._moving = [(int(model.body_mocapid[model.body(extra.name).id]), extra)
+                        for extra in extras.objects if extra.role == "obstacle" and extra.motion is not None]
         if self._renderer is None:
             self._renderer = FusedRenderer(self.width, self.height)
         self._renderer.set_model(model)
@@ -261,6 +269,8 @@ class TabletopEnv(gym.Env):
             blended = (1 - s) * start_quat + s * quat  # nlerp: the per-chunk angle is small
             self.gripper.command(data, start_pos + s * (position - start_pos), blended / np.linalg.norm(blended),
                                  gripper)
+            for mocap, extra in self._moving:
+                data.mocap_pos[mocap, :2] = extra.position_at((self._steps + s) / self.control_hz)[:2]
             mujoco.mj_step(model, data, nstep=_CHUNK)
             if len(self._obstacle_geoms):
                 contacts.extend(self._obstacle_contacts())

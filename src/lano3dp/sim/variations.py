@@ -42,19 +42,36 @@ class VariationError(Lano3dpError, ValueError):
     """An unknown variation axis was asked for."""
 
 
+OBSTACLE_KINDS = ("cylinder", "box", "cluster")
+MOVING_SPEED = 0.04  # m/s, the peak speed of a moving obstacle (the issue's bound is 5 cm/s)
+MOVING_AMPLITUDE = 0.06  # m, how far a moving obstacle swings either side of its spot on the path
+
+
 @dataclass(frozen=True)
 class Variation:
-    """A set of variation axes plus how many extra objects each adds."""
+    """A set of variation axes plus how many extra objects each adds.
+
+    The obstacle axis takes modifiers after colons: "obstacle:2" (two obstacles), "obstacle:box" (an upright
+    box), "obstacle:cluster" (two cylinders side by side, too close for the hand to pass between),
+    "obstacle:moving" (it swings across the path at up to MOVING_SPEED); e.g. "obstacle:box:moving".
+    """
 
     axes: frozenset[str] = frozenset()
     n_distractors: tuple[int, int] = (2, 4)  # inclusive range
     n_similar: int = 2
     n_obstacles: int = 1
+    obstacle_kind: str = "cylinder"
+    obstacle_speed: float = 0.0
 
     def __post_init__(self):
         unknown = set(self.axes) - set(VARIATION_AXES)
         if unknown:
             raise VariationError(f"unknown variation axes {sorted(unknown)}; known: clean, {', '.join(VARIATION_AXES)}")
+        if self.obstacle_kind not in OBSTACLE_KINDS:
+            raise VariationError(f"unknown obstacle kind {self.obstacle_kind!r}; known: {', '.join(OBSTACLE_KINDS)}")
+        if self.n_obstacles < 1 or not 0 <= self.obstacle_speed <= 0.05:
+            raise VariationError(f"need n_obstacles >= 1 and an obstacle speed of 0-0.05 m/s, got "
+                                 f"{self.n_obstacles}, {self.obstacle_speed}")
         object.__setattr__(self, "axes", frozenset(self.axes))
 
     @classmethod
@@ -66,7 +83,21 @@ class Variation:
         if isinstance(value, str):
             value = value.replace(",", "+").split("+")
         names = {v.strip().lower() for v in value if v.strip()} - {"clean", "none"}
-        return cls(frozenset(names))
+        options: dict = {}
+        for name in [n for n in names if n.startswith("obstacle:")]:
+            names.discard(name)
+            names.add("obstacle")
+            for modifier in name.split(":")[1:]:
+                if modifier.isdigit():
+                    options["n_obstacles"] = int(modifier)
+                elif modifier in OBSTACLE_KINDS:
+                    options["obstacle_kind"] = modifier
+                elif modifier == "moving":
+                    options["obstacle_speed"] = MOVING_SPEED
+                else:
+                    raise VariationError(f"unknown obstacle modifier {modifier!r} in {name!r}; use a count, "
+                                         f"{', '.join(OBSTACLE_KINDS)} or moving (e.g. obstacle:box:moving)")
+        return cls(frozenset(names), **options)
 
     def has(self, axis: str) -> bool:
         if axis not in VARIATION_AXES:
@@ -75,7 +106,15 @@ class Variation:
 
     @property
     def name(self) -> str:
-        return "+".join(a for a in VARIATION_AXES if a in self.axes) or "clean"
+        return "+".join(self._axis_name(a) for a in VARIATION_AXES if a in self.axes) or "clean"
+
+    def _axis_name(self, axis: str) -> str:
+        if axis != "obstacle":
+            return axis
+        modifiers = ([str(self.n_obstacles)] if self.n_obstacles > 1 else []) + (
+            [self.obstacle_kind] if self.obstacle_kind != "cylinder" else []) + (
+            ["moving"] if self.obstacle_speed > 0 else [])
+        return ":".join(["obstacle", *modifiers])
 
     def __str__(self) -> str:
         return self.name
@@ -92,8 +131,20 @@ class ExtraObject:
     color: str
     scale: float = 1.0
     role: str = "distractor"
-    radius: float = 0.03  # obstacles: cylinder radius
+    radius: float = 0.03  # obstacles: cylinder radius (a box's: its footprint's circumradius)
     height: float = 0.3   # obstacles: cylinder height
+    half_extents: tuple[float, float] | None = None  # box obstacles: xy half sizes (yaw above)
+    # moving obstacles: (unit direction (2,), amplitude m, angular frequency rad/s, phase rad) of the swing
+    # xy(t) = position + direction * amplitude * sin(omega * t + phase)
+    motion: tuple[np.ndarray, float, float, float] | None = None
+
+    def position_at(self, time_s: float) -> np.ndarray:
+        if self.motion is None:
+            return np.asarray(self.position)
+        direction, amplitude, omega, phase = self.motion
+        position = np.array(self.position, dtype=float)
+        position[:2] += direction * amplitude * np.sin(omega * time_s + phase)
+        return position
 
 
 @dataclass
@@ -172,7 +223,8 @@ def sample_extras(task, layout, rng: np.random.Generator, variation: Variation) 
     used_colors = {p.color for p in layout.objects.values()}
     # Obstacles first: they must sit on the path, and the other extras then keep clear of them.
     if variation.has("obstacle"):
-        extras.objects.extend(sample_obstacles(task, layout, rng, variation.n_obstacles, footprints))
+        extras.objects.extend(sample_obstacles(task, layout, rng, variation.n_obstacles, footprints,
+                                               kind=variation.obstacle_kind, speed=variation.obstacle_speed))
     if variation.has("similar"):
         for slot in task.similar_slots:
             target = layout.objects[slot]
@@ -205,8 +257,9 @@ def sample_extras(task, layout, rng: np.random.Generator, variation: Variation) 
 
 
 def sample_obstacles(task, layout, rng: np.random.Generator, count: int,
-                     footprints: list[tuple[np.ndarray, float]]) -> list[ExtraObject]:
-    """Cylinders standing on the expert's path, clear of every object footprint by 1.5 cm.
+                     footprints: list[tuple[np.ndarray, float]], *, kind: str = "cylinder",
+                     speed: float = 0.0) -> list[ExtraObject]:
+    """Obstacles standing on the expert's path, clear of every object footprint by 1.5 cm.
 
     First within 2 cm of the task's `obstacle_region` (its transport segment); where that has no
     free spot (e.g. a task whose path only rises and falls over its objects), within 5 cm of any
@@ -216,17 +269,33 @@ def sample_obstacles(task, layout, rng: np.random.Generator, count: int,
     the gripper where the region starts and ends (the grasp and the release): an obstacle 5 cm from a
     block is inside the 13 cm palm's reach as it closes on the block, so no path could avoid it (the hand
     touched it in 12 of 16 put_item_in_drawer scenes, with or without guidance).
+
+    kind: "cylinder" (the paper's), "box" (an upright box, yaw free) or "cluster" (a second cylinder 0.5-1.5 cm
+    beside the first). speed > 0: each obstacle swings across the path by MOVING_AMPLITUDE at that peak speed,
+    and its whole swing keeps the clearances above. The default draws exactly the random numbers it always did.
     """
     attempts = [(task.obstacle_region(layout), 0.02, 200), (task.nominal_path(layout), 0.05, 300)]
     keep_out = GRIPPER_FOOTPRINT_RADIUS + START_CLEARANCE - 0.015  # 1.5 cm added below
     start = (HOME_POSITION[:2], keep_out)
     ends = [(region[end, :2], keep_out) for region, _, _ in attempts for end in (0, -1)]
-    obstacles = []
-    for i in range(count):
+    swing = np.linspace(-1.0, 1.0, 7) * (MOVING_AMPLITUDE if speed > 0 else 0.0)
+
+    def clear(xy: np.ndarray, radius: float, across: np.ndarray) -> bool:
+        for spot in xy + swing[:, None] * across:
+            if np.any(spot < PLACEMENT_LOW) or np.any(spot > PLACEMENT_HIGH):
+                return False
+            if any(np.linalg.norm(spot - c) < r + radius + 0.015 for c, r in [*footprints, start, *ends]):
+                return False
+        return True
+
+    obstacles: list[ExtraObject] = []
+    for _ in range(count):
         placed = False
         for region, offset, tries in attempts:
             for _ in range(tries):
                 radius = float(rng.uniform(0.025, 0.04))
+                half_extents = (radius, float(rng.uniform(0.02, 0.05))) if kind == "box" else None
+                footprint = float(np.hypot(*half_extents)) if half_extents else radius
                 segment = int(rng.integers(len(region) - 1)) if len(region) > 1 else 0
                 a, b = region[segment, :2], region[min(segment + 1, len(region) - 1), :2]
                 direction = b - a
@@ -234,15 +303,40 @@ def sample_obstacles(task, layout, rng: np.random.Generator, count: int,
                     continue
                 normal = np.array([-direction[1], direction[0]]) / np.linalg.norm(direction)
                 xy = a + rng.uniform(0.1, 0.9) * direction + normal * rng.uniform(-offset, offset)
-                if np.any(xy < PLACEMENT_LOW) or np.any(xy > PLACEMENT_HIGH):
+                if not clear(xy, footprint, normal):
                     continue
-                if any(np.linalg.norm(xy - c) < r + radius + 0.015 for c, r in [*footprints, start, *ends]):
-                    continue
-                footprints.append((xy, radius))
-                obstacles.append(ExtraObject(f"obstacle_{i}", "cylinder", xy, 0.0, "grey", 1.0, "obstacle",
-                                             radius=radius, height=float(rng.uniform(0.3, 0.4))))
+                height = float(rng.uniform(0.3, 0.4))
+                motion = (normal, MOVING_AMPLITUDE, speed / MOVING_AMPLITUDE, float(rng.uniform(0, 2 * np.pi))) \
+                    if speed > 0 else None
+                group = [ExtraObject("", "box" if half_extents else "cylinder", xy,
+                                     float(rng.uniform(0, np.pi)) if half_extents else 0.0, "grey", 1.0, "obstacle",
+                                     radius=footprint, height=height, half_extents=half_extents, motion=motion)]
+                footprints.append((xy, footprint))
+                if kind == "cluster":
+                    group += _cluster_mate(rng, xy, radius, height, motion, clear, footprints)
+                for extra in group:
+                    extra.name = f"obstacle_{len(obstacles)}"
+                    obstacles.append(extra)
                 placed = True
                 break
             if placed:
                 break
     return obstacles
+
+
+def _cluster_mate(rng, xy, radius, height, motion, clear, footprints) -> list[ExtraObject]:
+    """A second cylinder just beside the first (a gap narrower than the hand), or none where none fits."""
+    across = motion[0] if motion is not None else np.zeros(2)
+    for _ in range(24):
+        mate_radius = float(rng.uniform(0.025, 0.04))
+        angle = float(rng.uniform(-np.pi, np.pi))
+        mate = xy + (radius + mate_radius + float(rng.uniform(0.005, 0.015))) * np.array([np.cos(angle), np.sin(angle)])
+        # the first cylinder is in `footprints` now: leave it out of the mate's check, it is meant to be close
+        others, footprints[:] = footprints[:], footprints[:-1]
+        fits = clear(mate, mate_radius, across)
+        footprints[:] = others
+        if fits:
+            footprints.append((mate, mate_radius))
+            return [ExtraObject("", "cylinder", mate, 0.0, "grey", 1.0, "obstacle", radius=mate_radius,
+                                height=float(rng.uniform(0.3, 0.4)), motion=motion)]
+    return []

@@ -194,13 +194,25 @@ def add_item(builder, name, position, shape="sphere", color="yellow", scale=1.0,
 
 
 def add_cylinder_obstacle(builder, name, position, radius=0.03, height=0.3, color="grey",
-                          role="obstacle") -> ObjectInfo:
-    """A static upright cylinder standing on the table (the paper's obstacle model)."""
-    body = builder.world.add_body(name=name, pos=_position(position, 0.0))
+                          role="obstacle", moving=False) -> ObjectInfo:
+    """A static upright cylinder standing on the table (the paper's obstacle model); `moving` makes it a
+    mocap body the env slides over the table."""
+    body = builder.world.add_body(name=name, pos=_position(position, 0.0), mocap=bool(moving))
     body.add_geom(name=f"{name}/cyl", type=CYLINDER, size=[radius, height / 2, 0], pos=[0, 0, height / 2],
                   rgba=rgba(color))
     info = ObjectInfo(name, "cylinder", color, size_word(radius / 0.03), (name,), radius, np.array(body.pos), role,
                       np.array([radius, radius, height]))
+    return builder.register(info)
+
+
+def add_box_obstacle(builder, name, position, half_extents=(0.03, 0.04), yaw=0.0, height=0.3, color="grey",
+                     role="obstacle", moving=False) -> ObjectInfo:
+    """A static upright box (xy half extents, yaw about z) standing on the table."""
+    hx, hy = (float(h) for h in half_extents)
+    body = builder.world.add_body(name=name, pos=_position(position, 0.0), quat=yaw_quat(yaw), mocap=bool(moving))
+    body.add_geom(name=f"{name}/box", type=BOX, size=[hx, hy, height / 2], pos=[0, 0, height / 2], rgba=rgba(color))
+    info = ObjectInfo(name, "box", color, size_word(max(hx, hy) / 0.03), (name,), float(np.hypot(hx, hy)),
+                      np.array(body.pos), role, np.array([hx, hy, height]))
     return builder.register(info)
 
 

@@ -64,7 +64,7 @@ class EvalConfig:
 
     Attributes:
         checkpoint: a policy folder or a training run (its checkpoints/last).
-        task: simulator task name (default: the task the checkpoint's dataset was recorded on).
+        task: task name, the simulator's or one `env`'s factory knows (default: the checkpoint's task).
         variation: "clean" or axes joined by "+" (e.g. "obstacle", "clutter+camera").
         episodes: how many episodes; seeds are seed, seed + 1, ...
         seed: first episode seed (also seeds the sampling noise of each episode).
@@ -639,7 +639,8 @@ class RunConfig:
         instruction: what the user says, e.g. "pour the bowl into the pan and keep clear of the grey cylinder".
         checkpoint: the policy to run (default: the plan's skill's checkpoint in `registry`).
         registry: a skill registry JSON (SkillRegistry.to_json) naming a checkpoint per skill.
-        task: simulator task (default: the plan's skill, whose registry name is the task name).
+        task: simulator task, or the task `env`'s factory gets (default: the plan's skill, whose registry name
+            is the task name).
         variation: scene variation (default: "obstacle" when the plan names obstacles, else "clean").
         guidance, rho, last_steps, per_train_step, metric_gradient, scheduler, steps, checked, margin: as EvalConfig.
         segmenter, detector, detector_dir, sam_dir: the perception of targets and obstacles, as EvalConfig.

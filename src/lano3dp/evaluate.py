@@ -5,12 +5,17 @@
     result["summary"]["success_rate"], result["summary"]["collision_rate"]
     result["summary"]["stage_rates"]   # e.g. {"reached_handle": 0.9, "grasped_handle": 0.6, ..., "opened": 0.4}
 
-Each episode is a fresh `TabletopEnv` scene from its seed (seed, seed + 1, ...; the default first
+Each episode is a fresh scene from its seed (seed, seed + 1, ...; the default first
 seed 1000000 keeps evaluation scenes apart from demonstration seeds: 0, 1, ... and their retries
 at multiples of 100003, see data.collect). Episodes run in
 `workers` spawned processes with one torch thread each (two OpenMP threads per process stall on a
 shared 2-core machine; notes/cpu-cost.md sec. 1), and results come back in seed order, so the JSON does
 not depend on the number of workers. Latencies measured with several workers include their contention.
+
+The env is the built-in `TabletopEnv` by default, or a user's own simulator or robot from `env`, a factory
+named 'module:factory' or 'path/to/file.py:factory' (`lano3dp.env_factory`: what the factory is called with, what
+the env must return, and what degrades when the env is not the simulator); both are built by
+`env_factory.make_env`.
 
 Perception is built by `perception.factory.build_segmenter` from `segmenter`: the simulator's ground-truth
 masks by default ("sim"), or the paper's open-vocabulary detector + SAM ("open-vocab"); targets are named by
@@ -38,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from lano3dp import env_factory
 from lano3dp.errors import Lano3dpError
 
 DEFAULT_EVAL_SEED = 1_000_000
@@ -58,7 +64,7 @@ class EvalConfig:
 
     Attributes:
         checkpoint: a policy folder or a training run (its checkpoints/last).
-        task: simulator task name (default: the task the checkpoint's dataset was recorded on).
+        task: task name, the simulator's or one `env`'s factory knows (default: the checkpoint's task).
         variation: "clean" or axes joined by "+" (e.g. "obstacle", "clutter+camera").
         episodes: how many episodes; seeds are seed, seed + 1, ...
         seed: first episode seed (also seeds the sampling noise of each episode).
@@ -82,6 +88,12 @@ class EvalConfig:
         workers: parallel processes (1 runs in this process).
         video_dir, n_videos: write MP4s of the first n_videos episodes there.
         out: results JSON path (None: not written).
+        env: None for the built-in simulator, else an env factory: 'module:factory', 'path/to/file.py:factory',
+            or a module-level callable (saved as its 'module:factory' name, so results and worker processes can
+            re-make it). It is called with task, seed, variation, image_size, render_rgb and max_steps (those its
+            signature names) and returns an env meeting `lano3dp.sim.protocol.SimulatorProtocol`; see
+            `lano3dp.env_factory`. For a task the simulator does not know the skill check is skipped, and
+            max_steps defaults to the env's own `max_steps` attribute.
     """
 
     checkpoint: str
@@ -113,10 +125,12 @@ class EvalConfig:
     detector: str = "grounding_dino"
     detector_dir: str | None = None
     sam_dir: str | None = None
+    env: str | None = None
     body: str = "swept"
 
     def __post_init__(self):
         self.checkpoint = str(self.checkpoint)
+        self.env = env_spec(self.env)
         if self.episodes < 1 or self.workers < 1:
             raise ValueError(f"episodes and workers must be >= 1, got {self.episodes}, {self.workers}")
         if self.guidance not in ("none", "noisy", "clean"):
@@ -126,6 +140,27 @@ class EvalConfig:
             raise ValueError(f"body must be 'swept' or 'sphere', got {self.body!r}")
         if self.held_radius is not None and self.body != "sphere":
             raise ValueError("a fixed held radius sizes the 'sphere' body model; add body='sphere' (--body sphere)")
+
+
+def env_spec(env) -> str | None:
+    """An EvalConfig/RunConfig `env` as saved: None, or the factory's 'module:factory' text."""
+    if env is None or isinstance(env, str):
+        return env or None
+    if callable(env):
+        return env_factory.factory_name(env)
+    raise env_factory.EnvFactoryError(f"env must be 'module:factory', 'path/to/file.py:factory' or a callable, "
+                                      f"got a {type(env).__name__}")
+
+
+def check_env_task(task: str, policy_config, env: str | None) -> None:
+    """The skill check for the env's task: always in the simulator; in a user's env only when its task has a
+    simulator task's name (another name says nothing about the skill)."""
+    if env is not None:
+        from lano3dp.sim.tasks import TASKS
+
+        if task not in TASKS:
+            return
+    check_task_matches_policy(task, policy_config)
 
 
 SEGMENTERS = {"sim": "oracle", "open-vocab": "open_vocab"}  # option value -> perception.factory kind
@@ -231,7 +266,6 @@ class EpisodeRunner:
     def __init__(self, config: EvalConfig):
         from lano3dp.perception import ObjectObserver
         from lano3dp.policy import DiffusionPolicy
-        from lano3dp.sim import TabletopEnv
 
         self.config = config
         self.policy = DiffusionPolicy.from_pretrained(config.checkpoint)
@@ -240,12 +274,15 @@ class EpisodeRunner:
         task = config.task or settings.task or self.policy.config.extra.get("task")
         if task is None:
             raise ValueError("no task given and the checkpoint does not say which task it was trained on; pass --task")
-        check_task_matches_policy(task, self.policy.config)
+        check_env_task(task, self.policy.config, config.env)
         self.task = task
         image_size = config.image_size or settings.image_size or 128
         needs_rgb = self.policy.config.obs_type == "image" or bool(config.video_dir)
-        self.env = TabletopEnv(task, variation=config.variation, image_size=image_size, render_rgb=needs_rgb,
-                               max_steps=config.max_steps)
+        self.env = env_factory.make_env(config.env, task=task, seed=config.seed, variation=config.variation,
+                                        image_size=image_size, render_rgb=needs_rgb, max_steps=config.max_steps)
+        # the simulator truncates at its own limit; a user's env may not, so its max_steps attribute bounds it
+        self.max_steps = config.max_steps if config.env is None else (config.max_steps
+                                                                      or getattr(self.env, "max_steps", None))
         self.observer = ObjectObserver(build_config_segmenter(config), n_points=self.policy.config.n_points,
                                        crop_low=settings.crop_low, crop_high=settings.crop_high)
 
@@ -267,8 +304,9 @@ class EpisodeRunner:
         frames: list[np.ndarray] = []
         on_frame = (lambda frame, info: frames.append(frame.rgb.copy())) if video_path else None
         result = rollout(self.env, runner, seed=seed, on_reset=on_reset, on_frame=on_frame,
-                         max_steps=config.max_steps)
+                         max_steps=self.max_steps)
         record = result.to_dict(include_path=True)
+        record["success_reported"] = self.env.reports_success  # False: the env never said, "success" is unmeasured
         if video_path and frames:
             write_video(video_path, frames)
             record["video"] = video_path
@@ -554,6 +592,11 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
                 finished(index, record)
     episodes = [records[index] for index in sorted(records)]
     summary = summarize(episodes)
+    notes = []
+    if episodes and not any(e.get("success_reported", True) for e in episodes):
+        # an env without info["success"]: a success rate of 0 would read as a measurement
+        summary.update(success_rate=None, safe_success_rate=None, successes=None)
+        notes.append("the environment reports no info['success']: success is not measured")
     result = {
         "command": command if command is not None else shlex.join(["lano3dp", *sys.argv[1:]]),
         "config": asdict(config),
@@ -564,6 +607,8 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
         "timing": {"started_utc": started_at, "wall_s": round(time.perf_counter() - started, 2),
                    "workers": workers, "cpu_count": os.cpu_count(), "resumed_episodes": resumed},
         "versions": library_versions(),
+        "env": config.env or "builtin",
+        "notes": notes,
     }
     if config.out:
         write_json(config.out, result)
@@ -603,13 +648,18 @@ class RunConfig:
         instruction: what the user says, e.g. "pour the bowl into the pan and keep clear of the grey cylinder".
         checkpoint: the policy to run (default: the plan's skill's checkpoint in `registry`).
         registry: a skill registry JSON (SkillRegistry.to_json) naming a checkpoint per skill.
-        task: simulator task (default: the plan's skill, whose registry name is the task name).
+        task: simulator task, or the task `env`'s factory gets (default: the plan's skill, whose registry name
+            is the task name).
         variation: scene variation (default: "obstacle" when the plan names obstacles, else "clean").
         guidance, rho, last_steps, per_train_step, metric_gradient, scheduler, steps, checked, margin: as EvalConfig.
         segmenter, detector, detector_dir, sam_dir: the perception of targets and obstacles, as EvalConfig.
         compare: also run the same scene without guidance, for the plot.
         seed: scene seed.
         out: folder for run.json, video.mp4 and top_view.png.
+        env: as EvalConfig.env (None: the built-in simulator). With a user's env the scene is the one its reset
+            gives (no search for a scene with room for an obstacle), the plan is grounded in the objects its
+            frame names (not at all when it names none), and the factory gets task = the plan's skill unless
+            `task` is given.
     """
 
     instruction: str
@@ -634,9 +684,11 @@ class RunConfig:
     detector: str = "grounding_dino"
     detector_dir: str | None = None
     sam_dir: str | None = None
+    env: str | None = None
 
     def __post_init__(self):
         check_segmenter_choice(self.segmenter)
+        self.env = env_spec(self.env)
 
 
 def ground_obstacles(frame, phrases: Sequence[str]) -> tuple[list[str], list[str]]:
@@ -687,8 +739,7 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     from lano3dp.policy import DiffusionPolicy
     from lano3dp.policy.pretrained import packaged_checkpoint, packaged_checkpoints
     from lano3dp.report import plot_top_view
-    from lano3dp.runtime import PolicyRunner, rollout
-    from lano3dp.sim import TabletopEnv
+    from lano3dp.runtime import PolicyRunner, observe, rollout
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -708,16 +759,16 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     policy = DiffusionPolicy.from_pretrained(checkpoint)
     settings = dataset_settings(checkpoint)
     task = config.task or plan.skill
-    check_task_matches_policy(task, policy.config)
+    check_env_task(task, policy.config, config.env)
     variation = config.variation or ("obstacle" if plan.obstacles else "clean")
-    env = TabletopEnv(task, variation=variation, image_size=settings.image_size or 128, render_rgb=True,
-                      max_steps=config.max_steps)
+    env = env_factory.make_env(config.env, task=task, seed=config.seed, variation=variation,
+                               image_size=settings.image_size or 128, render_rgb=True, max_steps=config.max_steps)
+    max_steps = config.max_steps if config.env is None else (config.max_steps or getattr(env, "max_steps", None))
     observer = ObjectObserver(build_config_segmenter(config), n_points=policy.config.n_points,
                               crop_low=settings.crop_low, crop_high=settings.crop_high)
     seed = config.seed
-    _, _ = env.reset(seed=seed)
-    frame = env.frame()
-    if plan.obstacles and env.episode.variation.has("obstacle"):
+    frame, _ = observe(env, env.reset(seed=seed)[0])
+    if plan.obstacles and config.env is None and env.episode.variation.has("obstacle"):
         # a layout can leave no room for an obstacle on the path (e.g. the drawer right beside the start):
         # show the instruction on the next scene that has one rather than fail on this one
         while not any(a.get("role") == "obstacle" for a in frame.instance_attributes.values()) \
@@ -729,7 +780,7 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
             log(f"note: scene {config.seed} has no room for an obstacle on the path; using scene {seed}")
     scene_objects = [n for n, a in frame.instance_attributes.items() if a.get("role") != "robot"]
     try:
-        plan = decomposer.decompose(config.instruction, scene_objects)
+        plan = decomposer.decompose(config.instruction, scene_objects or None)  # None: a frame naming no objects
         obstacles, notes = list(plan.obstacle_phrases), []
     except UnknownObjectError as error:  # e.g. an obstacle the simulator cannot show: stand in its obstacles
         log(f"note: {error}")
@@ -754,16 +805,17 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
         runner = PolicyRunner(policy, observer, runtime_config(eval_config, seed), target_phrases=targets,
                               obstacle_phrases=obstacles, held_object=held)
         frames: list[np.ndarray] = []
-        result = rollout(env, runner, seed=seed, max_steps=config.max_steps,
+        result = rollout(env, runner, seed=seed, max_steps=max_steps,
                          on_frame=lambda f, info, frames=frames: frames.append(f.rgb.copy()))
         video = write_video(out / f"video_{label}.mp4", frames)
         record = result.to_dict(include_path=True)
         record["video"] = str(video)
+        record["success_reported"] = env.reports_success
         episodes[label] = record
-        paths.append((f"{label}: {'success' if result.success else 'failure'}"
-                       + (", collided" if result.collided else ""), result.ee_path))
+        outcome = ("success" if result.success else "failure") if env.reports_success else "success not reported"
+        paths.append((f"{label}: {outcome}" + (", collided" if result.collided else ""), result.ee_path))
         clearance = "–" if result.min_clearance is None else f"{100 * result.min_clearance:.1f} cm"
-        log(f"{label}: {'SUCCESS' if result.success else 'failure'} after {result.steps} steps, "
+        log(f"{label}: {outcome.upper() if result.success else outcome} after {result.steps} steps, "
             f"obstacle contact: {'yes' if result.collided else 'no'}, min clearance {clearance}, "
             f"path {result.path_length:.2f} m, {len(result.chunk_latency_s)} chunks, "
             f"mean latency {1000 * np.mean(result.chunk_latency_s or [0]):.0f} ms"

@@ -99,3 +99,20 @@ def segmenter(kind: str, detector: str, detector_dir: Path | None, sam_dir: Path
         if missing:
             raise typer.BadParameter(f"open-vocab needs local weight folders: give {' and '.join(missing)}",
                                      param_hint="--segmenter")
+
+
+ENV_HELP = ("Your own simulator or robot: module:factory or path/to/file.py:factory, called with task, seed, "
+            "variation, image_size, render_rgb, max_steps (those it names) and returning an env meeting "
+            "lano3dp.sim.protocol (default: the built-in simulator).")
+
+
+def env_factory(spec: str | None, option: str = "--env") -> str | None:
+    """--env names an importable callable (the module is imported here, before any episode runs)."""
+    from lano3dp.env_factory import EnvFactoryError, load_factory
+
+    if spec is not None:
+        try:
+            load_factory(spec)
+        except EnvFactoryError as error:
+            raise typer.BadParameter(str(error).removeprefix(f"--env {spec}: "), param_hint=option) from None
+    return spec

@@ -51,6 +51,7 @@ def eval_command(
     detector: str = typer.Option("grounding_dino", help="open-vocab: grounding_dino | owlv2."),
     detector_dir: Path = typer.Option(None, help=_options.DETECTOR_DIR_HELP),
     sam_dir: Path = typer.Option(None, help=_options.SAM_DIR_HELP),
+    env: str = typer.Option(None, "--env", help=_options.ENV_HELP),
     out: Path = typer.Option(Path("results.json"), help="Results JSON; each finished episode is also appended to "
                                                         "<out>.episodes.jsonl, from which a killed eval resumes."),
 ) -> None:
@@ -63,8 +64,10 @@ def eval_command(
     from lano3dp.policy.pretrained import packaged_checkpoint
 
     console = Console(stderr=True)
-    _options.task_name(task)
-    _options.variation(variation)
+    _options.env_factory(env)
+    if env is None:  # a user's env has its own task names and variations
+        _options.task_name(task)
+        _options.variation(variation)
     _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
     _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
     _options.choice(body, ("swept", "sphere"), "--body")
@@ -88,8 +91,9 @@ def eval_command(
         body=body, held_radius=held_radius, max_steps=max_steps, workers=workers,
         video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out),
         segmenter=segmenter, detector=detector, detector_dir=str(detector_dir) if detector_dir else None,
-        sam_dir=str(sam_dir) if sam_dir else None)
-    console.print(f"[bold]eval[/bold] {checkpoint} on {task or '(dataset task)'} / {variation}: {episodes} episodes, "
+        sam_dir=str(sam_dir) if sam_dir else None, env=env)
+    console.print(f"[bold]eval[/bold] {checkpoint} on {task or '(dataset task)'} / {variation}"
+                  + (f" in {env}" if env else "") + f": {episodes} episodes, "
                   f"guidance {guidance}" + (f" rho={rho} S={last_steps}" if guidance != "none" else "")
                   + f", {workers} worker(s)")
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -113,13 +117,16 @@ def eval_command(
         console.print(stage_line(summary))
     if summary["errors"]:
         console.print(f"[yellow]episodes ended by errors:[/yellow] {', '.join(summary['errors'])}")
+    for note in result.get("notes", []):
+        console.print(f"[yellow]note:[/yellow] {note}")
     console.print(f"results: {out}")
 
 
 def summary_line(summary: dict) -> str:
     """One human line for a results summary."""
-    parts = [f"success {summary['success_rate']:.0%} ({summary['successes']}/{summary['episodes']})",
-             f"collisions {summary['collision_rate']:.0%}"]
+    success = ("success not reported by the env" if summary["success_rate"] is None
+               else f"success {summary['success_rate']:.0%} ({summary['successes']}/{summary['episodes']})")
+    parts = [success, f"collisions {summary['collision_rate']:.0%}"]
     if summary["mean_min_clearance"] is not None:
         parts.append(f"mean min clearance {summary['mean_min_clearance'] * 100:.1f} cm")
     parts.append(f"path {summary['mean_path_length']:.2f} m")

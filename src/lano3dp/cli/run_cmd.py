@@ -38,6 +38,7 @@ def run_command(
     detector: str = typer.Option("grounding_dino", help="open-vocab: grounding_dino | owlv2."),
     detector_dir: Path = typer.Option(None, help=_options.DETECTOR_DIR_HELP),
     sam_dir: Path = typer.Option(None, help=_options.SAM_DIR_HELP),
+    env: str = typer.Option(None, "--env", help=_options.ENV_HELP),
     out: Path = typer.Option(Path("run_out"), help="Folder for run.json, video_*.mp4 and top_view.png."),
 ) -> None:
     """Run one instruction in the simulator and show what happened (plan, outcome, video, top-view plot)."""
@@ -48,8 +49,10 @@ def run_command(
     from lano3dp.evaluate import RunConfig, run_instruction
 
     console = Console()
-    _options.task_name(task)
-    _options.variation(variation)
+    _options.env_factory(env)
+    if env is None:  # a user's env has its own task names and variations
+        _options.task_name(task)
+        _options.variation(variation)
     _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
     _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
     _options.segmenter(segmenter, detector, detector_dir, sam_dir)
@@ -63,7 +66,7 @@ def run_command(
                        checked=checked, compare=compare, max_steps=max_steps, seed=seed, out=str(out),
                        segmenter=segmenter, detector=detector,
                        detector_dir=str(detector_dir) if detector_dir else None,
-                       sam_dir=str(sam_dir) if sam_dir else None)
+                       sam_dir=str(sam_dir) if sam_dir else None, env=env)
     result = run_instruction(config, log=console.print, command=command_line(ctx))
     console.print(f"video(s): {', '.join(e['video'] for e in result['episodes'].values())}")
     console.print(f"top view: {result['top_view']}   record: {Path(out) / 'run.json'}")

@@ -77,6 +77,9 @@ class EvalConfig:
         scheduler, steps: inference scheduler and its number of denoising steps (None: the policy's default).
         checked: checked execution (re-sample with a larger rho while the executed part collides).
         margin, held_radius: obstacle model; held_radius None measures it from the held object's cloud.
+        obstacle_scenes_only: with an obstacle variation, evaluate the first `episodes` seeds from `seed` whose
+            scene has room for every obstacle asked for (chosen from the layout alone, never from an outcome).
+        refit_obstacles: re-segment and re-fit the obstacles before every chunk (moving obstacles).
         body: what guidance keeps clear: "swept" (hand and held object as balls re-measured every chunk) or
             "sphere" (the paper: one ball of held_radius round the EE point); see `runtime.ObstacleModel`.
         n_action_steps: actions executed per chunk (None: the policy's).
@@ -127,6 +130,8 @@ class EvalConfig:
     sam_dir: str | None = None
     env: str | None = None
     body: str = "swept"
+    obstacle_scenes_only: bool = False
+    refit_obstacles: bool = False
 
     def __post_init__(self):
         self.checkpoint = str(self.checkpoint)
@@ -138,6 +143,9 @@ class EvalConfig:
         check_segmenter_choice(self.segmenter)
         if self.body not in ("swept", "sphere"):
             raise ValueError(f"body must be 'swept' or 'sphere', got {self.body!r}")
+        if self.obstacle_scenes_only and self.env is not None:
+            raise ValueError("obstacle_scenes_only picks seeds from the built-in simulator's layouts; "
+                             "a user's env picks its own scenes")
         if self.held_radius is not None and self.body != "sphere":
             raise ValueError("a fixed held radius sizes the 'sphere' body model; add body='sphere' (--body sphere)")
 
@@ -254,7 +262,8 @@ def runtime_config(config: EvalConfig, seed: int):
     return RuntimeConfig(
         guidance=guidance_config(config), scheduler=config.scheduler, num_inference_steps=config.steps,
         n_action_steps=config.n_action_steps,
-        obstacle=ObstacleModel(margin=config.margin, body=config.body, held_radius=config.held_radius),
+        obstacle=ObstacleModel(margin=config.margin, body=config.body, held_radius=config.held_radius,
+                               refit_every_chunk=config.refit_obstacles),
         checked=CheckConfig(initial_scale=max(config.rho, 1e-3), densify=config.densify) if config.checked else None,
         metric_gradient=config.metric_gradient, densify=config.densify, seed=seed)
 
@@ -543,6 +552,20 @@ def evaluate(config: EvalConfig, progress: Callable[[int, int, dict], None] | No
             lock.release()
 
 
+def evaluation_seeds(config: EvalConfig, checkpoint: Path) -> list[int]:
+    """The episode seeds: seed, seed + 1, ...; or, with obstacle_scenes_only, the first seeds from seed on
+    whose scene has room for the variation's obstacles."""
+    if not config.obstacle_scenes_only:
+        return [config.seed + i for i in range(config.episodes)]
+    from lano3dp.policy.modeling import load_config
+    from lano3dp.sim.env import obstacle_scene_seeds
+
+    task = config.task or dataset_settings(checkpoint).task or load_config(checkpoint / "config.json").extra.get("task")
+    if task is None:
+        raise ValueError("no task given and the checkpoint does not say which task it was trained on; pass --task")
+    return obstacle_scene_seeds(task, config.variation, config.seed, config.episodes)
+
+
 def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
     from lano3dp.data.store import library_versions
     from lano3dp.policy.modeling import load_config, resolve_checkpoint
@@ -554,7 +577,7 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
         raise IsADirectoryError(f"--out {config.out} is a folder; give the results JSON file to write")
     log = EpisodeLog(episode_log_path(config.out), evaluation_identity(config, checkpoint)) if config.out else None
     records: dict[int, dict[str, Any]] = dict(log.records) if log else {}
-    seeds = [config.seed + i for i in range(config.episodes)]
+    seeds = evaluation_seeds(config, checkpoint)
     records = {index: record for index, record in records.items() if index < len(seeds)}
     resumed = len(records)
     jobs = []

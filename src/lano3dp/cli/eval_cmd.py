@@ -38,6 +38,9 @@ def eval_command(
     steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
     checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
     margin: float = typer.Option(0.02, help="Safety margin (m) beyond contact, part of Q*."),
+    obstacle_scenes_only: bool = typer.Option(False, help="With an obstacle variation: the first --episodes seeds "
+                                                          "whose scene has room for its obstacles."),
+    refit_obstacles: bool = typer.Option(False, help="Re-fit obstacles before every chunk (moving obstacles)."),
     body: str = typer.Option("swept", help="What guidance keeps clear: swept (hand + held object, re-measured "
                                           "every chunk) | sphere (the paper: one ball round the EE point)."),
     held_radius: float = typer.Option(None, help="--body sphere: its radius (m) in Q*; default: measured from the "
@@ -88,7 +91,8 @@ def eval_command(
         obstacles=list(obstacles) if obstacles else None, guidance=guidance, rho=rho, last_steps=last_steps,
         per_train_step=per_train_step, metric_gradient=metric_push, densify=densify, scheduler=scheduler, steps=steps,
         checked=checked, margin=margin,
-        body=body, held_radius=held_radius, max_steps=max_steps, workers=workers,
+        body=body, obstacle_scenes_only=obstacle_scenes_only, refit_obstacles=refit_obstacles,
+        held_radius=held_radius, max_steps=max_steps, workers=workers,
         video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out),
         segmenter=segmenter, detector=detector, detector_dir=str(detector_dir) if detector_dir else None,
         sam_dir=str(sam_dir) if sam_dir else None, env=env)

@@ -94,6 +94,33 @@ class EpisodeInfo:
     variation: Variation
 
 
+def sample_episode(task: Task, seed: int, variation: Variation) -> tuple[Layout, SceneExtras]:
+    """The layout and extras of episode `seed`, without building it (cheap: e.g. to find scenes with room for
+    an obstacle). `reset` builds exactly these."""
+    rng = np.random.default_rng(int(seed))
+    layout = task.sample_layout(rng, variation)
+    layout.seed = int(seed)
+    return layout, sample_extras(task, layout, rng, variation)
+
+
+def obstacle_scene_seeds(task: str | Task, variation, start: int, count: int, max_tries: int = 100_000) -> list[int]:
+    """The first `count` seeds from `start` on whose scene got every obstacle the variation asks for."""
+    task = make_task(task) if isinstance(task, str) else task
+    variation = Variation.parse(variation)
+    if not variation.has("obstacle"):
+        return list(range(start, start + count))
+    seeds: list[int] = []
+    for seed in range(start, start + max_tries):
+        _, extras = sample_episode(task, seed, variation)
+        placed = sum(extra.role == "obstacle" for extra in extras.objects)
+        wanted = variation.n_obstacles * (2 if variation.obstacle_kind == "cluster" else 1)
+        if placed >= wanted:
+            seeds.append(seed)
+            if len(seeds) == count:
+                return seeds
+    raise ValueError(f"only {len(seeds)} of {max_tries} {task.name} scenes have room for {variation.name}")
+
+
 class TabletopEnv(gym.Env):
     """Gymnasium env for one task; every `reset` builds a fresh scene from the seed.
 
@@ -163,10 +190,7 @@ class TabletopEnv(gym.Env):
         options = options or {}
         variation = Variation.parse(options["variation"]) if "variation" in options else self.variation
         episode_seed = int(seed) if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
-        rng = np.random.default_rng(episode_seed)
-        layout = self.task.sample_layout(rng, variation)
-        layout.seed = episode_seed
-        extras = sample_extras(self.task, layout, rng, variation)
+        layout, extras = sample_episode(self.task, episode_seed, variation)
         if not variation.has("camera"):
             extras.camera = self.camera_pose
         self.episode = EpisodeInfo(episode_seed, layout, extras, variation)

@@ -1,0 +1,226 @@
+"""Obstacle avoidance that keeps the task: the paper's bowl-pour test (its Fig. 4) and two more.
+
+Per task, the policy packaged for it (`lano3dp eval --task T` without --checkpoint) is evaluated
+  - on clean scenes (its clean success, the reference), and
+  - with a novel obstacle on the demonstrated path, by four samplers:
+        none      no guidance
+        A_k       the cost on the noisy sample A_k (the prior work the paper contrasts with), otherwise as default
+        paper     the paper's form: A_0|k, DDPM-100, S = 10, the push in normalised action units (rho 4, the
+                  smallest that kept bench_guidance's synthetic paths clear), Q* from a ball of the held
+                  object's diameter round the EE point, waypoints only
+        default   the project's: A_0|k, the policy's DDIM, every step guided, rho 0.04 m per guided step
+                  (`MetricGradient`), segments densified x4, the hand and the held object as a swept body
+  - and, with the default sampler (and none beside it), the harder rows of `--extra-variations`: a box,
+    a cluster of two, two obstacles, one that moves (re-fitted before every chunk).
+Obstacle episodes use the first seeds from 1000000 whose layout has room for the obstacles (chosen from the
+layout alone: `EvalConfig.obstacle_scenes_only`), clean ones 1000000 + i.
+
+Every failed episode is classified from its stages and contacts (`failure_class`). Evaluations are cached
+in --work, keyed by their configuration (a re-run only adds what is missing; delete a JSON after changing
+the runtime's code). Outputs: results/obstacles<tag>.json and .md, headed by the command.
+
+    OMP_NUM_THREADS=1 python bench/bench_obstacles.py                      # ~1.5 h on 2 cores
+    OMP_NUM_THREADS=1 python bench/bench_obstacles.py --episodes 4 --tasks bowl_pour --extra-variations \
+        obstacle:moving --tag _smoke                                        # a few minutes
+"""
+
+from __future__ import annotations
+
+import argparse
+import platform
+import shlex
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+from lano3dp.evaluate import EvalConfig, write_json
+from lano3dp.pipeline import eval_stage
+from lano3dp.policy.pretrained import packaged_checkpoint
+from lano3dp.report import markdown_table, percent, wilson_interval
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLERS = {
+    "none": {"guidance": "none"},
+    "A_k": {"guidance": "noisy"},
+    "paper": {"guidance": "clean", "scheduler": "ddpm", "steps": 100, "last_steps": 10, "metric_gradient": False,
+              "rho": 4.0, "densify": 1, "body": "sphere"},
+    "default": {"guidance": "clean"},
+}
+FAILURE_CLASSES = ("target not seen", "touched the obstacle", "grasp missed", "lost on the carry",
+                   "last stage unfinished", "other")
+
+
+def failure_class(episode: dict) -> str | None:
+    """Why an episode failed (None if it succeeded), from its error, contacts and the task's stages.
+
+    target not seen: perception found no target (e.g. the obstacle hid it in the first frame);
+    touched the obstacle: a failure with contact (the path was blocked or the detour too narrow);
+    grasp missed: a task with a "grasped" stage that never got there (e.g. pushed off by the guidance);
+    lost on the carry: grasped, but never reached the stage before the last (e.g. the pan, the drawer):
+        the detour left the demonstrations' states, or was too wide to come back;
+    last stage unfinished: at the goal, the final stage (pour, place) never completed.
+    """
+    if episode["success"]:
+        return None
+    error = episode.get("error") or ""
+    if "NotFound" in error or "TooFewPoints" in error:
+        return "target not seen"
+    if episode["collided"]:
+        return "touched the obstacle"
+    stages = list((episode.get("stages") or {}).items())
+    if not stages:
+        return "other"
+    names = [name for name, _ in stages]
+    reached = [flag for _, flag in stages]
+    if "grasped" in names and not reached[names.index("grasped")]:
+        return "grasp missed"
+    if len(stages) >= 2 and not reached[-2]:
+        return "lost on the carry"
+    if not reached[-1]:
+        return "last stage unfinished"
+    return "other"
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--tasks", default="bowl_pour,put_item_in_drawer,bottle_in_drawer")
+    parser.add_argument("--samplers", default=",".join(SAMPLERS))
+    parser.add_argument("--episodes", type=int, default=50, help="episodes per row (obstacle rows: with obstacles)")
+    parser.add_argument("--extra-variations", default="obstacle:moving,obstacle:2,obstacle:box,obstacle:cluster",
+                        help="harder rows, default sampler and none")
+    parser.add_argument("--extra-tasks", default="bowl_pour", help="tasks of the harder rows")
+    parser.add_argument("--seed", type=int, default=1_000_000)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--work", default="bench/out/obstacles")
+    parser.add_argument("--tag", default="")
+    parser.add_argument("--report-only", action="store_true", help="tabulate what --work holds")
+    return parser.parse_args(argv)
+
+
+def row(summary: dict, episodes: list[dict], clean: dict | None) -> dict:
+    low, high = wilson_interval(summary["successes"], summary["episodes"])
+    classes = Counter(c for c in map(failure_class, episodes) if c is not None)
+    contact_steps = [e["n_collision_steps"] for e in episodes]
+    entry = {
+        "episodes": summary["episodes"], "episodes_with_obstacles": summary["episodes_with_obstacles"],
+        "success_rate": summary["success_rate"], "success_interval": [low, high],
+        "touch_rate": summary["collision_rate"], "touch_interval": list(wilson_interval(
+            sum(e["collided"] for e in episodes), len(episodes))),
+        "mean_contact_steps": summary["mean_collision_steps"], "max_contact_steps": max(contact_steps, default=0),
+        "mean_min_clearance": summary["mean_min_clearance"], "worst_min_clearance": summary["worst_min_clearance"],
+        "mean_path_length": summary["mean_path_length"], "latency_mean_s": summary["latency_mean_s"],
+        "failure_classes": {c: classes.get(c, 0) for c in FAILURE_CLASSES},
+        "stage_rates": summary["stage_rates"], "seeds": [e["seed"] for e in episodes],
+    }
+    if clean is not None:
+        entry["clean_success_rate"] = clean["success_rate"]
+        entry["ratio_to_clean"] = (round(summary["success_rate"] / clean["success_rate"], 3)
+                                   if clean["success_rate"] else None)
+    return entry
+
+
+def main(argv=None) -> int:
+    args = parse_args(argv)
+    tasks = [t for t in args.tasks.split(",") if t]
+    samplers = [s for s in args.samplers.split(",") if s]
+    if unknown := sorted(set(samplers) - set(SAMPLERS)):
+        raise SystemExit(f"unknown samplers {unknown}; choose from {', '.join(SAMPLERS)}")
+    extra_variations = [v for v in args.extra_variations.split(",") if v]
+    extra_tasks = [t for t in args.extra_tasks.split(",") if t]
+    work = Path(args.work)
+    command = shlex.join(["python", "bench/bench_obstacles.py", *(argv if argv is not None else sys.argv[1:])])
+    started = time.perf_counter()
+
+    def log(message: str) -> None:
+        print(f"[{time.perf_counter() - started:7.0f}s] {message}", flush=True)
+
+    def evaluate(task: str, variation: str, name: str, sampler: str) -> tuple[dict, list[dict]] | None:
+        out = work / task / f"{name}.json"
+        options = dict(SAMPLERS[sampler])
+        config = EvalConfig(checkpoint=str(packaged_checkpoint(task)), task=task, variation=variation,
+                            episodes=args.episodes, seed=args.seed, workers=args.workers, out=str(out),
+                            obstacle_scenes_only=variation != "clean", refit_obstacles="moving" in variation,
+                            **options)
+        if args.report_only:
+            from lano3dp.pipeline import cached_eval
+
+            result = cached_eval(config)
+            if result is None:
+                return None
+        else:
+            log(f"{task} / {variation} / {sampler}")
+            result = eval_stage(config, log=log, command=command)
+        return result["summary"], result["episodes"]
+
+    results: dict = {"command": command, "config": vars(args), "samplers": SAMPLERS, "tasks": {},
+                     "machine": {"platform": platform.platform(), "python": platform.python_version(),
+                                 "note": "2-core CPU shared with other jobs: latencies are pessimistic"}}
+    out_json = ROOT / "results" / f"obstacles{args.tag}.json"
+    out_md = ROOT / "results" / f"obstacles{args.tag}.md"
+    for task in tasks:
+        entry = results["tasks"].setdefault(task, {"rows": {}})
+        clean = evaluate(task, "clean", "clean", "none")
+        clean_summary = clean[0] if clean else None
+        if clean:
+            entry["clean"] = row(*clean, None)
+        jobs = [("obstacle", s) for s in samplers]
+        if task in extra_tasks:
+            jobs += [(v, s) for v in extra_variations for s in ("none", "default") if s in samplers]
+        for variation, sampler in jobs:
+            name = f"{variation.replace(':', '_')}_{sampler}"
+            measured = evaluate(task, variation, name, sampler)
+            if measured:
+                entry["rows"][f"{variation}/{sampler}"] = {"variation": variation, "sampler": sampler,
+                                                           **row(*measured, clean_summary)}
+            results["wall_s"] = round(time.perf_counter() - started, 1)
+            write_json(out_json, results)
+            out_md.write_text(markdown_report(results))
+    write_json(out_json, results)
+    out_md.write_text(markdown_report(results))
+    log(f"done: {out_json.relative_to(ROOT)}, {out_md.relative_to(ROOT)}")
+    return 0
+
+
+def _interval(values) -> str:
+    low, high = values
+    return "–" if low is None else f"{percent(low)}–{percent(high)}"
+
+
+def markdown_report(results: dict) -> str:
+    lines = ["# Obstacle avoidance that keeps the task", "", f"Command: `{results['command']}`", "",
+             "Policies: the packaged ones (`src/lano3dp/checkpoints/<task>`, training seed 0, see their "
+             "record.json). Obstacle rows: the first seeds from 1000000 whose layout has room for the obstacles; "
+             "clean: seeds 1000000 + i. Intervals: 95% Wilson. touch = any contact of hand or held object with "
+             "an obstacle; contact steps = steps with contact (mean over episodes); clearance = the simulator's "
+             "smallest gap (m), mean over episodes; ratio = success / the same policy's clean success.", "",
+             "Samplers: " + "; ".join(f"**{name}** {options}" for name, options in results["samplers"].items()), ""]
+    for task, entry in results["tasks"].items():
+        lines += [f"## {task}", ""]
+        if "clean" in entry:
+            clean = entry["clean"]
+            lines += [f"Clean success: {percent(clean['success_rate'])} ({_interval(clean['success_interval'])}), "
+                      f"{clean['episodes']} episodes.", ""]
+        table = []
+        for key, r in entry["rows"].items():
+            table.append([r["variation"], r["sampler"], r["episodes_with_obstacles"],
+                          f"{percent(r['success_rate'])} ({_interval(r['success_interval'])})",
+                          r.get("ratio_to_clean"),
+                          f"{percent(r['touch_rate'])} ({_interval(r['touch_interval'])})",
+                          r["mean_contact_steps"],
+                          None if r["mean_min_clearance"] is None else f"{100 * r['mean_min_clearance']:.1f} cm",
+                          None if r["latency_mean_s"] is None else f"{1000 * r['latency_mean_s']:.0f} ms"])
+        if table:
+            lines += [markdown_table(["variation", "sampler", "episodes w/ obstacle", "success", "ratio to clean",
+                                      "touch", "contact steps", "clearance", "latency/chunk"], table), ""]
+            lines += ["Failures by class:", "",
+                      markdown_table(["variation", "sampler", *FAILURE_CLASSES],
+                                     [[r["variation"], r["sampler"], *(r["failure_classes"][c]
+                                                                       for c in FAILURE_CLASSES)]
+                                      for r in entry["rows"].values()]), ""]
+    return "\n".join(lines) + "\n"
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

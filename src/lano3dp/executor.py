@@ -216,6 +216,9 @@ class LocalExecutor:
                     except CellFailedError as error:
                         failure = failure or error
                         continue
+                    except Exception as error:  # the process died, or the cell could not be pickled
+                        failure = failure or CellFailedError(cell.name, repr(error))
+                        continue
                     finished.add(cell.name)
                     executed.append(cell.name)
         if failure is not None:
@@ -313,8 +316,9 @@ class RayExecutor:
         refs: dict[str, Any] = {}
         for cell in todo:  # dependency order: an input's ref exists before its readers are submitted
             after = [refs[name] for name in cell.inputs if name in refs]
-            refs[cell.name] = task.options(num_cpus=cell.cpus, name=cell.name, max_retries=0).remote(
-                cell, kinds[cell.kind], env, *after)
+            # Ray retries a task whose worker died (a lost node); safe, since a cell resumes from its folder
+            refs[cell.name] = task.options(num_cpus=cell.cpus, name=cell.name).remote(cell, kinds[cell.kind], env,
+                                                                                     *after)
         names = {ref: name for name, ref in refs.items()}
         executed, pending = [], list(refs.values())
         while pending:

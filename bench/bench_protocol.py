@@ -17,16 +17,26 @@ Methods share everything but the observation: "objects" (Lan-o3dp: clouds of the
 name), "scene" (DP3: the cropped scene cloud), "image" (Diffusion Policy: a 96x96 RGB image). Evaluation
 episodes use seeds 1000000 + i, apart from the demonstrations'.
 
-Every stage is resumable: datasets grow to size, training runs resume from their last checkpoint, an
-evaluation whose JSON exists with the same configuration is skipped. Outputs:
+The protocol is a graph of cells (`lano3dp.executor`): one collect cell per task, one train cell per (task,
+method, seed), one eval cell per evaluation, each declaring the CPU cores it keeps busy (1; an evaluation
+--eval-workers). `--plan` prints it. `--executor local` runs it on this machine (`--workers N`: N cores' worth
+of cells at once in spawned processes); `--executor ray` makes each cell a Ray task, on a local instance bound
+to 127.0.0.1 or on the cluster `--ray-address` names, with `--work` on a filesystem every node sees. The
+report is assembled from the work folder once the cells are done (--report-only does only that).
+
+Every cell is resumable: datasets grow to size, training runs resume from their last checkpoint, an
+evaluation whose JSON exists with the same configuration is skipped, so a re-run, by either executor,
+continues where the last one stopped. Outputs:
     <work>/...                                 datasets, runs, per-evaluation JSONs (large; not committed)
     results/protocol<tag>.json                 every number, the configuration, the command, the seeds
     results/protocol<tag>.md                   the tables, headed by the command that made them
+    results/protocol<tag>_success.png          final success per task and method, 95% Wilson intervals
+    results/protocol<tag>_drops.png            clean minus varied success per variation axis and method
 
 The default protocol (3 tasks x 3 methods x 2000 steps, 20 episodes per evaluation, and Lan-o3dp on the
 obstacle task) takes about 6-7 CPU-hours here, most of it training the two baselines (a step of the
-scene-cloud encoder costs ~4x, of the image encoder ~5x, a Lan-o3dp step). One process per task over
-one --work folder uses both cores; then --report-only tabulates the folder. A reduced run, e.g. for a smoke check:
+scene-cloud encoder costs ~4x, of the image encoder ~5x, a Lan-o3dp step). `--workers 2` uses both cores.
+A reduced run, e.g. for a smoke check:
 
     OMP_NUM_THREADS=1 python bench/bench_protocol.py --tasks bowl_pour --demos 20 --steps 400 --eval-every 200 \
         --episodes 5 --variations camera,clutter --tag _reduced
@@ -40,12 +50,23 @@ import shlex
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from lano3dp.evaluate import DEFAULT_LAST_STEPS, DEFAULT_RHO, EvalConfig, write_json
-from lano3dp.pipeline import cached_eval, collect_stage, eval_stage, train_stage
-from lano3dp.report import markdown_table, percent, wilson_interval
+from lano3dp.executor import (
+    Cell,
+    CellFailedError,
+    RayNotInstalledError,
+    collect_cell,
+    describe,
+    eval_cell,
+    make_executor,
+    train_cell,
+)
+from lano3dp.pipeline import cached_eval
+from lano3dp.report import markdown_table, percent, plot_success_intervals, plot_variation_drops, wilson_interval
 
 ROOT = Path(__file__).resolve().parent.parent
 METHODS = {"objects": "Lan-o3dp (object clouds)", "scene": "DP3 (scene cloud)", "image": "Diffusion Policy (RGB)"}
@@ -83,9 +104,24 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--lr", type=float, default=1e-3)
     parser.add_argument("--model", default="small", help="UNet size: small (5.4 M), medium (18 M), dp (67 M)")
     parser.add_argument("--seeds", default="0", help="comma-separated training seeds")
-    parser.add_argument("--workers", type=int, default=1, help="parallel evaluation processes")
-    parser.add_argument("--work", default=str(ROOT / "bench" / "out" / "protocol"), help="datasets, runs, evals")
+    parser.add_argument("--executor", choices=("local", "ray"), default="local",
+                        help="who runs the cells: local (this machine, --workers processes) or ray (one Ray task "
+                             "per cell; needs pip install 'lano3dp[ray]')")
+    parser.add_argument("--workers", type=int, default=1,
+                        help="local executor: CPU cores' worth of cells run at once (1: in this process)")
+    parser.add_argument("--ray-address", default=None,
+                        help="ray executor: join this cluster ('auto', 'ray://host:10001'); default: start a local "
+                             "instance on 127.0.0.1")
+    parser.add_argument("--ray-cpus", type=int, default=None,
+                        help="ray executor: CPUs of the local instance (default: all of this machine's)")
+    parser.add_argument("--eval-workers", type=int, default=1,
+                        help="processes per evaluation cell (its declared CPU need)")
+    parser.add_argument("--work", default=str(ROOT / "bench" / "out" / "protocol"),
+                        help="datasets, runs, evals; with --executor ray, a folder every node sees at this path")
+    parser.add_argument("--results", default=str(ROOT / "results"),
+                        help="folder of protocol<tag>.json|md and its plots")
     parser.add_argument("--tag", default="", help="suffix of results/protocol<tag>.json|md")
+    parser.add_argument("--plan", action="store_true", help="print the graph of cells and exit")
     parser.add_argument("--note", default="", help="a line printed under the table's title (e.g. 'reduced run')")
     parser.add_argument("--report-only", action="store_true",
                         help="train and evaluate nothing: tabulate what the work folder holds (runs made by several "
@@ -93,112 +129,200 @@ def parse_args(argv=None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def summary_cells(summary: dict) -> tuple[str, str]:
-    low, high = wilson_interval(summary["successes"], summary["episodes"])
-    return percent(summary["success_rate"]), f"{percent(low)}–{percent(high)}"
+class Overrides(NamedTuple):
+    """Settings the command line does not expose, for reduced runs (tests): each a dict of keyword arguments.
+
+    collect: to `data.collect.collect` (e.g. image_size); policy: to `train.policy_config_for_dataset` (UNet and
+    encoder widths); train: to `pipeline.train_stage` (e.g. val_ratio); eval: EvalConfig fields (e.g. max_steps).
+    The report reads the evaluations back with the same EvalConfigs, so give it the same overrides.
+    """
+
+    collect: dict = {}
+    policy: dict = {}
+    train: dict = {}
+    eval: dict = {}
 
 
-def main(argv=None) -> int:
+class Run(NamedTuple):
+    """One (task, method, seed) training run of the protocol and the evaluations planned on it."""
+
+    task: str
+    method: str
+    seed: int
+    data: Path
+    folder: Path
+    obstacle_only: bool
+    evals: dict  # name -> EvalConfig; "clean_step0000400", ..., "<variation>_final", "obstacle_*"
+
+
+def _lists(args: argparse.Namespace) -> dict[str, list]:
+    return {"tasks": [t for t in args.tasks.split(",") if t], "methods": [m for m in args.methods.split(",") if m],
+            "variations": [v for v in args.variations.split(",") if v],
+            "obstacle_methods": [m for m in args.obstacle_methods.split(",") if m],
+            "obstacle_tasks": [t for t in args.obstacle_tasks.split(",") if t],
+            "seeds": [int(s) for s in args.seeds.split(",") if s]}
+
+
+def checkpoint_steps(steps: int, every: int) -> list[int]:
+    """The steps a run of `steps` checkpointing every `every` saves: each multiple of `every`, and the last."""
+    return sorted({*range(every, steps + 1, every), steps})
+
+
+def dataset_path(args: argparse.Namespace, task: str) -> Path:
+    return Path(args.work) / "data" / f"{task}_n{args.points}.zarr"
+
+
+def plan_runs(args: argparse.Namespace, overrides: Overrides = Overrides()) -> list[Run]:
+    """Every training run of the protocol with its evaluations, in the report's order."""
+    from lano3dp.policy.checkpoint import checkpoint_name
+
+    lists, work = _lists(args), Path(args.work)
+    runs = []
+    for task in [*lists["tasks"], *(t for t in lists["obstacle_tasks"] if t not in lists["tasks"])]:
+        obstacle_only = task not in lists["tasks"]
+        for method in lists["methods"]:
+            if obstacle_only and method not in lists["obstacle_methods"]:
+                continue
+            for seed in lists["seeds"]:
+                folder = work / "runs" / task / method / f"seed{seed}"
+                evals_dir = work / "evals" / task / method / f"seed{seed}"
+
+                def config(step: int, variation: str, name: str, guidance: str = "none", episodes=None,
+                           rho: float | None = None, folder=folder, evals_dir=evals_dir, task=task) -> EvalConfig:
+                    fields = {"checkpoint": str(folder / "checkpoints" / checkpoint_name(step)), "task": task,
+                              "variation": variation, "episodes": episodes or args.episodes, "guidance": guidance,
+                              "rho": args.rho if rho is None else rho, "last_steps": args.last_steps,
+                              "workers": args.eval_workers, "out": str(evals_dir / f"{name}.json")}
+                    return EvalConfig(**{**fields, **overrides.eval})
+
+                evals = {f"clean_step{step:07d}": config(step, "clean", f"clean_step{step:07d}")
+                         for step in checkpoint_steps(args.steps, args.eval_every)}
+                if not obstacle_only:
+                    evals |= {f"{v}_final": config(args.steps, v, f"{v}_final") for v in lists["variations"]}
+                if method in lists["obstacle_methods"] and task in lists["obstacle_tasks"]:
+                    n = args.obstacle_episodes or args.episodes
+                    evals["obstacle_none"] = config(args.steps, "obstacle", "obstacle_none", "none", n)
+                    evals["obstacle_clean"] = config(args.steps, "obstacle", "obstacle_clean", "clean", n)
+                    for rho in _floats(args.rho_sweep):
+                        if rho != args.rho:
+                            name = f"obstacle_clean_rho{rho:g}"
+                            evals[name] = config(args.steps, "obstacle", name, "clean", n, rho)
+                runs.append(Run(task, method, seed, dataset_path(args, task), folder, obstacle_only, evals))
+    return runs
+
+
+def build_graph(args: argparse.Namespace, overrides: Overrides = Overrides()) -> list[Cell]:
+    """The protocol as cells: collect per task -> train per (task, method, seed) -> one cell per evaluation.
+
+    The report is not a cell: it is assembled from the work folder once the cells are done (`collect_results`),
+    which is also what --report-only does.
+    """
+    from lano3dp.policy import down_dims_for
+
+    cells, collected = [], set()
+    for run in plan_runs(args, overrides):
+        collect_name = f"collect {run.task}"
+        if collect_name not in collected:
+            collected.add(collect_name)
+            cells.append(collect_cell(collect_name, run.task, args.demos, run.data,
+                                      **{"n_points": args.points, **overrides.collect}))
+        key = f"{run.task} {run.method}/seed{run.seed}"
+        policy = {"obs_type": run.method, "down_dims": list(down_dims_for(args.model)), **overrides.policy}
+        cells.append(train_cell(f"train {key}", run.data, run.folder, steps=args.steps, policy=policy,
+                                inputs=[collect_name], **{"batch_size": args.batch_size, "lr": args.lr,
+                                                          "ckpt_every": args.eval_every, "seed": run.seed,
+                                                          **overrides.train}))
+        cells += [eval_cell(f"eval {key} {name}", config, inputs=[f"train {key}"])
+                  for name, config in run.evals.items()]
+    return cells
+
+
+def main(argv=None, overrides: Overrides = Overrides()) -> int:
     args = parse_args(argv)
-    tasks = [t for t in args.tasks.split(",") if t]
-    methods = [m for m in args.methods.split(",") if m]
-    unknown = sorted(set(methods) - set(METHODS))
+    unknown = sorted(set(_lists(args)["methods"]) - set(METHODS))
     if unknown:
         raise SystemExit(f"unknown methods {unknown}; choose from {sorted(METHODS)}")
-    variations = [v for v in args.variations.split(",") if v]
-    obstacle_methods = [m for m in args.obstacle_methods.split(",") if m]
-    obstacle_tasks = [t for t in args.obstacle_tasks.split(",") if t]
-    seeds = [int(s) for s in args.seeds.split(",") if s]
-    work = Path(args.work)
     command = shlex.join(["python", "bench/bench_protocol.py", *(argv if argv is not None else sys.argv[1:])])
     started = time.perf_counter()
 
     def log(message: str) -> None:
         print(f"[{time.perf_counter() - started:7.0f}s] {message}", flush=True)
 
-    results: dict = {"command": command, "config": vars(args), "tasks": {}, "machine": {
-        "platform": platform.platform(), "python": platform.python_version(), "note": "2-core CPU shared with other "
-        "jobs while this ran: timings are pessimistic"}}
-    out_json = ROOT / "results" / f"protocol{args.tag}.json"
-    out_md = ROOT / "results" / f"protocol{args.tag}.md"
-
-    for task in [*tasks, *(t for t in obstacle_tasks if t not in tasks)]:
-        obstacle_only = task not in tasks
-        data = work / "data" / f"{task}_n{args.points}.zarr"
-        if not args.report_only:
-            collect_stage(task, args.demos, data, log=log, progress=False, n_points=args.points)
-        task_result = results["tasks"].setdefault(task, {})
-        for method in methods:
-            if obstacle_only and method not in obstacle_methods:
-                continue
-            for seed in seeds:
-                entry = run_method(task, method, seed, data, work, args, log, command,
-                                   obstacle=method in obstacle_methods and task in obstacle_tasks,
-                                   variations=[] if obstacle_only else variations)
-                task_result[f"{method}/seed{seed}"] = {**entry, "obstacle_only": obstacle_only}
-                results["wall_s"] = round(time.perf_counter() - started, 1)
-                write_json(out_json, results)
-                out_md.write_text(markdown_report(results, args))
+    cells = build_graph(args, overrides)
+    if args.plan:
+        print(describe(cells))
+        return 0
+    if not args.report_only:
+        try:
+            executor = make_executor(args.executor, workers=args.workers, ray_address=args.ray_address,
+                                     ray_cpus=args.ray_cpus)
+        except RayNotInstalledError as error:
+            raise SystemExit(f"--executor ray: {error}") from None
+        try:
+            done = executor.run(cells, log=log)
+        except CellFailedError as error:
+            raise SystemExit(f"{error}\nThe cells done so far are kept in {args.work}; re-run to continue.") \
+                from None
+        log(f"graph: ran {len(done.executed)} cells, {len(done.skipped)} were done already")
+    results = collect_results(args, command, overrides)
+    results["wall_s"] = round(time.perf_counter() - started, 1)
+    out_json, out_md = write_report(results, args)
     log(f"done: {out_json}, {out_md}")
     return 0
 
 
-def run_method(task: str, method: str, seed: int, data: Path, work: Path, args: argparse.Namespace, log,
-               command: str, *, obstacle: bool, variations: list[str]) -> dict:
-    """Train one (task, method, seed) run and evaluate it: the curve, the variations, the obstacle test."""
-    from lano3dp.policy import down_dims_for
-    from lano3dp.policy.checkpoint import list_checkpoints
-    from lano3dp.train import policy_config_for_dataset
+def collect_results(args: argparse.Namespace, command: str, overrides: Overrides = Overrides()) -> dict:
+    """Every number of the protocol, read from the work folder; what is missing is marked not run."""
+    results: dict = {"command": command, "config": vars(args), "tasks": {}, "machine": {
+        "platform": platform.platform(), "python": platform.python_version(), "note": "2-core CPU shared with other "
+        "jobs while this ran: timings are pessimistic"}}
+    for run in plan_runs(args, overrides):
+        entry = run_entry(run, args)
+        results["tasks"].setdefault(run.task, {})[f"{run.method}/seed{run.seed}"] = \
+            {**entry, "obstacle_only": run.obstacle_only}
+    return results
 
-    key = f"{task} {method}/seed{seed}"
-    run = work / "runs" / task / method / f"seed{seed}"
-    if not args.report_only:
-        policy = policy_config_for_dataset(data, obs_type=method, down_dims=down_dims_for(args.model))
-        log(f"{key}: train {args.steps} steps")
-        train_stage(data, run, policy_config=policy, steps=args.steps, batch_size=args.batch_size, lr=args.lr,
-                    ckpt_every=args.eval_every, seed=seed, log=log, progress=False)
-    checkpoints = [(step, path) for step, path in list_checkpoints(run / "checkpoints") if step <= args.steps] \
-        if (run / "checkpoints").is_dir() else []
-    if not checkpoints or checkpoints[-1][0] != args.steps:
-        log(f"{key}: not trained to {args.steps} steps; marked not run")
-        return {"method": METHODS[method], "seed": seed, "not_run": True}
-    evals = work / "evals" / task / method / f"seed{seed}"
 
-    def evaluate(checkpoint: Path, variation: str, name: str, guidance: str = "none", episodes=None,
-                 rho: float | None = None) -> dict | None:
-        config = EvalConfig(checkpoint=str(checkpoint), task=task, variation=variation,
-                            episodes=episodes or args.episodes, guidance=guidance, rho=args.rho if rho is None else rho,
-                            last_steps=args.last_steps, workers=args.workers, out=str(evals / f"{name}.json"))
-        if args.report_only:
-            if (results := cached_eval(config)) is None:
-                return None
-            summary = results["summary"]
-        else:
-            summary = eval_stage(config, log=log, command=command)["summary"]
-        cells = summary_cells(summary)
-        log(f"{key} {name}: success {cells[0]} ({cells[1]}), collisions {percent(summary['collision_rate'])}")
-        return _compact(summary)
+def write_report(results: dict, args: argparse.Namespace) -> tuple[Path, Path]:
+    """results/protocol<tag>.json and .md, and the two plots beside them (linked from the .md)."""
+    folder = Path(args.results)
+    out_json, out_md = folder / f"protocol{args.tag}.json", folder / f"protocol{args.tag}.md"
+    figures = plot_report(results, args, folder)
+    write_json(out_json, results)
+    out_md.write_text(markdown_report(results, args, figures))
+    return out_json, out_md
 
-    entry = {"method": METHODS[method], "seed": seed, "run": str(run), "parameters": _parameters(checkpoints[-1][1]),
+
+def run_entry(run: Run, args: argparse.Namespace) -> dict:
+    """One run's row of the report: the curve, the paper's best-k and the final, variations, obstacle test."""
+    from lano3dp.policy.checkpoint import checkpoint_name
+
+    not_run = {"method": METHODS[run.method], "seed": run.seed, "not_run": True}
+    final = run.folder / "checkpoints" / checkpoint_name(args.steps)
+    if not final.is_dir():
+        return not_run
+
+    def evaluation(name: str) -> dict | None:
+        cached = cached_eval(run.evals[name]) if name in run.evals else None
+        return None if cached is None else _compact(cached["summary"])
+
+    entry = {"method": METHODS[run.method], "seed": run.seed, "run": str(run.folder), "parameters": _parameters(final),
              "steps": args.steps, "curve": []}
-    for step, checkpoint in checkpoints:
-        if (point := evaluate(checkpoint, "clean", f"clean_step{step:07d}")) is not None:
+    for step in checkpoint_steps(args.steps, args.eval_every):
+        if (point := evaluation(f"clean_step{step:07d}")) is not None:
             entry["curve"].append({"step": step, **point})
     if not entry["curve"] or entry["curve"][-1]["step"] != args.steps:
-        return {"method": METHODS[method], "seed": seed, "not_run": True}
+        return not_run
     rates = sorted((point["success_rate"] for point in entry["curve"]), reverse=True)
     entry["paper_best_k"] = float(np.mean(rates[: args.best_k]))
     entry["best_k_used"] = min(args.best_k, len(rates))
     entry["final"] = entry["curve"][-1]
-    final = checkpoints[-1][1]
-    entry["variations"] = {v: evaluate(final, v, f"{v}_final") for v in variations}
-    if obstacle:
-        n = args.obstacle_episodes or args.episodes
-        entry["obstacle"] = {"no_guidance": evaluate(final, "obstacle", "obstacle_none", "none", n),
-                             "guidance": evaluate(final, "obstacle", "obstacle_clean", "clean", n)}
-        entry["obstacle_sweep"] = {f"{rho:g}": evaluate(final, "obstacle", f"obstacle_clean_rho{rho:g}", "clean",
-                                                        n, rho)
-                                   for rho in _floats(args.rho_sweep) if rho != args.rho}
+    entry["variations"] = {v: evaluation(f"{v}_final") for v in _lists(args)["variations"]} \
+        if not run.obstacle_only else {}
+    if "obstacle_none" in run.evals:
+        entry["obstacle"] = {"no_guidance": evaluation("obstacle_none"), "guidance": evaluation("obstacle_clean")}
+        entry["obstacle_sweep"] = {name.removeprefix("obstacle_clean_rho"): evaluation(name) for name in run.evals
+                                   if name.startswith("obstacle_clean_rho")}
     return entry
 
 
@@ -226,7 +350,47 @@ def _compact(summary: dict) -> dict:
     return {k: summary.get(k) for k in keep}
 
 
-def markdown_report(results: dict, args: argparse.Namespace) -> str:
+def success_cells(results: dict) -> dict[tuple[str, str], list[tuple[int, int]]]:
+    """(task, method label) -> the final checkpoint's (successes, episodes) per seed that ran."""
+    cells: dict[tuple[str, str], list[tuple[int, int]]] = {}
+    for task, entries in results["tasks"].items():
+        for entry in entries.values():
+            seeds = cells.setdefault((task, entry["method"]), [])
+            if not entry.get("not_run"):
+                seeds.append((entry["final"]["successes"], entry["final"]["episodes"]))
+    return cells
+
+
+def variation_drops(results: dict) -> dict[str, dict[str, list[float]]]:
+    """method label -> variation axis -> clean minus varied final success, one value per (task, seed) run."""
+    drops: dict[str, dict[str, list[float]]] = {}
+    for entries in results["tasks"].values():
+        for entry in entries.values():
+            if entry.get("not_run") or entry.get("obstacle_only"):
+                continue
+            by_axis = drops.setdefault(entry["method"], {})
+            for axis, summary in entry.get("variations", {}).items():
+                if summary is not None:
+                    by_axis.setdefault(axis, []).append(entry["final"]["success_rate"] - summary["success_rate"])
+    return drops
+
+
+def plot_report(results: dict, args: argparse.Namespace, folder: Path) -> dict[str, str]:
+    """The plots beside the tables: {"success": file name, "drops": file name} for those with data."""
+    figures = {}
+    cells = success_cells(results)
+    if any(cells.values()):
+        path = plot_success_intervals(folder / f"protocol{args.tag}_success.png", cells,
+                                      title="final checkpoint's clean success per task and method")
+        figures["success"] = path.name
+    drops = variation_drops(results)
+    if any(drops.values()):
+        path = plot_variation_drops(folder / f"protocol{args.tag}_drops.png", drops)
+        figures["drops"] = path.name
+    return figures
+
+
+def markdown_report(results: dict, args: argparse.Namespace, figures: dict[str, str] | None = None) -> str:
     lines = [f"# Protocol benchmark{' (' + args.note + ')' if args.note else ''}", "",
              f"Command: `{results['command']}`", "",
              f"Training seeds: {args.seeds}; evaluation seeds 1000000 + i; {args.demos} demonstrations per task "
@@ -237,6 +401,19 @@ def markdown_report(results: dict, args: argparse.Namespace) -> str:
              "Paper = mean success of the best "
              f"{args.best_k} evaluations along training (the paper's number); final = the last checkpoint (the "
              "honest one). Intervals are 95% Wilson intervals of the final checkpoint's success.", ""]
+    figures = figures or {}
+    if "success" in figures:
+        lines += [f"![final clean success per task and method, 95% Wilson intervals]({figures['success']})", ""]
+    drops = variation_drops(results)
+    if any(drops.values()):
+        axes = list(dict.fromkeys(axis for by_axis in drops.values() for axis in by_axis))
+        rows = [[method, *(f"{100 * np.mean(by_axis[a]):+.0f} ({len(by_axis[a])})" if by_axis.get(a) else "–"
+                           for a in axes)] for method, by_axis in drops.items()]
+        lines += ["Generalisation: clean minus varied success of the final checkpoints, in points, mean over "
+                  "(task, seed) runs (how many in brackets); positive = the change costs success.", "",
+                  markdown_table(["method", *axes], rows), ""]
+        if "drops" in figures:
+            lines += [f"![success lost under each scene change, per method]({figures['drops']})", ""]
     for task, entries in results["tasks"].items():
         lines += [f"## {task}", ""]
         rows = []

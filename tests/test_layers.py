@@ -1,8 +1,8 @@
 """Layering as a test: a lower layer never imports an upper one, counting function-local imports too.
 
 Layers, lowest first (README "Design", docs/architecture.md): geometry < data, perception, language, guidance,
-policy < sim < runtime, train, evaluate, env_factory, pipeline, augment, locking, report < cli. Modules of one
-layer may import one another (policy uses guidance's sampler). `lano3dp.errors` is the shared base, importable anywhere.
+policy < sim < runtime, train, evaluate, env_factory, pipeline, executor, augment, locking, report < cli. Modules of
+one layer may import one another (policy uses guidance's sampler). `lano3dp.errors` is the shared base, importable anywhere.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ LAYERS = (
     ("errors", "geometry"),
     ("data", "perception", "language", "guidance", "policy"),
     ("sim",),
-    ("runtime", "train", "evaluate", "env_factory", "pipeline", "augment", "locking", "report"),
+    ("runtime", "train", "evaluate", "env_factory", "pipeline", "executor", "augment", "locking", "report"),
     ("cli",),
 )
 RANK = {part: rank for rank, parts in enumerate(LAYERS) for part in parts}

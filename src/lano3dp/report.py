@@ -2,6 +2,8 @@
 
     plot_top_view    executed EE paths seen from above, with the fitted obstacles (radius and Q*)
     plot_rates       success / collision rates of several conditions side by side
+    plot_success_intervals   success per group and series (task, method) with 95% Wilson intervals
+    plot_variation_drops     success lost under each scene change, per series (method)
     markdown_table   a GitHub table from rows of cells
 """
 
@@ -70,7 +72,6 @@ def plot_top_view(path: str | Path, runs: Sequence[tuple[str, np.ndarray]], *,
     return _save_figure(plt, fig, path)
 
 
-
 def _save_figure(plt, fig, path: str | Path) -> Path:
     fig.tight_layout()
     path = Path(path)
@@ -99,6 +100,88 @@ def plot_rates(path: str | Path, conditions: Sequence[tuple[str, Mapping[str, An
     ax.set_ylabel("rate over episodes")
     ax.set_title(title, fontsize=10)
     ax.legend(fontsize=7, ncols=3, loc="upper center")
+    return _save_figure(plt, fig, path)
+
+
+def plot_success_intervals(path: str | Path, cells: Mapping[tuple[str, str], Sequence[tuple[int, int]]], *,
+                           title: str = "success per task and method") -> Path:
+    """Grouped bars of success rate with 95% Wilson intervals, one group per task, one bar per method.
+
+    Args:
+        path: PNG to write.
+        cells: (group, series) -> the (successes, episodes) of each seed, in the order groups and series are
+            drawn. A bar is the rate pooled over its seeds (its interval from the pooled counts); each seed is a
+            dot on it. An empty sequence draws no bar (a run not made).
+    """
+    plt = _pyplot()
+    groups = list(dict.fromkeys(group for group, _ in cells))
+    series = list(dict.fromkeys(name for _, name in cells))
+    fig, ax = plt.subplots(figsize=(max(5.0, 0.7 * len(groups) * max(1, len(series)) + 2.5), 3.8), dpi=120)
+    x = np.arange(len(groups))
+    width = 0.8 / max(1, len(series))
+    for index, name in enumerate(series):
+        color = _COLORS[index % len(_COLORS)]
+        offset = (index - (len(series) - 1) / 2) * width
+        labelled = False
+        for position, group in zip(x + offset, groups, strict=True):
+            seeds = cells.get((group, name)) or ()
+            trials = sum(episodes for _, episodes in seeds)
+            if trials == 0:
+                continue
+            successes = sum(count for count, _ in seeds)
+            rate = successes / trials
+            low, high = wilson_interval(successes, trials)
+            ax.bar(position, rate, width, color=color, alpha=0.85, label=None if labelled else name)
+            labelled = True
+            ax.errorbar(position, rate, yerr=[[rate - low], [high - rate]], color="black", capsize=3, lw=1)
+            if len(seeds) > 1:
+                ax.plot([position] * len(seeds), [c / e for c, e in seeds if e], ".", color="black", ms=4)
+            ax.annotate(f"{rate:.0%}", (position, high), textcoords="offset points", xytext=(0, 2), ha="center",
+                        fontsize=7)
+    ax.set_xticks(x, groups, fontsize=8, rotation=15 if len(groups) > 4 else 0)
+    ax.set_ylim(0, 1.1)
+    ax.set_ylabel("success rate (95% Wilson interval)")
+    ax.set_title(title, fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7, ncols=min(4, max(1, len(series))), loc="upper center", bbox_to_anchor=(0.5, -0.12))
+    return _save_figure(plt, fig, path)
+
+
+def plot_variation_drops(path: str | Path, drops: Mapping[str, Mapping[str, Sequence[float]]], *,
+                         title: str = "generalisation: success lost under each scene change") -> Path:
+    """Bars of the mean drop in success (clean minus varied, percentage points), per variation and method.
+
+    Args:
+        path: PNG to write.
+        drops: series (method) -> variation axis -> the drops (fractions, clean - varied) of its runs (tasks
+            and seeds); each is a dot, the bar their mean. Positive: the change costs success.
+    """
+    plt = _pyplot()
+    series = list(drops)
+    axes = list(dict.fromkeys(axis for by_axis in drops.values() for axis in by_axis))
+    fig, ax = plt.subplots(figsize=(max(5.0, 1.3 * len(axes) + 2.5), 3.6), dpi=120)
+    x = np.arange(len(axes))
+    width = 0.8 / max(1, len(series))
+    for index, name in enumerate(series):
+        color = _COLORS[index % len(_COLORS)]
+        offset = (index - (len(series) - 1) / 2) * width
+        labelled = False
+        for position, axis in zip(x + offset, axes, strict=True):
+            values = [100 * value for value in drops[name].get(axis, ())]
+            if not values:
+                continue
+            mean = float(np.mean(values))
+            ax.bar(position, mean, width, color=color, alpha=0.85, label=None if labelled else name)
+            labelled = True
+            ax.plot([position] * len(values), values, ".", color="black", ms=4)
+            ax.annotate(f"{mean:+.0f}", (position, max(mean, 0)), textcoords="offset points", xytext=(0, 2),
+                        ha="center", fontsize=7)
+    ax.axhline(0, color="black", lw=0.8)
+    ax.set_xticks(x, axes, fontsize=8)
+    ax.set_ylabel("clean - varied success (points)")
+    ax.set_title(title, fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=7, ncols=min(4, max(1, len(series))), loc="upper center", bbox_to_anchor=(0.5, -0.12))
     return _save_figure(plt, fig, path)
 
 

@@ -44,6 +44,9 @@ PAPER_TASKS = ("open_drawer", "open_wine_bottle", "sweep_to_dustpan", "phone_on_
 # default before the learning-efficiency work (d63c154), kept to measure the new one against.
 RECIPES = {
     "compact": {"points": 64, "policy": {}},
+    # the compact recipe on demonstrations with injected noise (DART): states off the expert's path, labelled
+    # with the way back (`data.collect`, issue 14: policies lost their way after an obstacle detour)
+    "dart": {"points": 64, "policy": {}, "collect": {"dart_noise": 0.03}},
     "previous": {"points": 128, "policy": dict(n_obs_steps=2, down_dims=(64, 128, 256),
                                                point_hidden_dims=(64, 128, 256), diffusion_step_embed_dim=128)},
 }
@@ -74,8 +77,10 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def run_cell(args, task: str, recipe: str, seed: int, log) -> None:
     settings = RECIPES[recipe]
-    data = collect_stage(task, args.demos, args.work / "data" / f"{task}_{settings['points']}pts.zarr", log=log,
-                         seed=0, n_points=settings["points"], progress=False)
+    collect_options = settings.get("collect", {})
+    suffix = "".join(f"_{key}{value:g}" for key, value in collect_options.items())
+    data = collect_stage(task, args.demos, args.work / "data" / f"{task}_{settings['points']}pts{suffix}.zarr",
+                         log=log, seed=0, n_points=settings["points"], progress=False, **collect_options)
     run = args.work / "runs" / f"{task}_{recipe}_seed{seed}"
     policy = policy_config_for_dataset(data, **settings["policy"])
     train_stage(data, run, policy_config=policy, minutes=args.minutes, n_checkpoints=args.checkpoints,

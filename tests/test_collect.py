@@ -59,3 +59,35 @@ def test_similar_scenes_record_the_colour_named_target(tmp_path):
     clouds = store.get_episode(0)["object_clouds"]
     # The lying green target is 2.5 cm above the table; the standing look-alikes would average ~6 cm.
     assert abs(clouds[0, 0, :, 2].mean() - 0.025) < 0.015
+
+
+def test_noise_injection_moves_the_robot_off_the_expert_path_but_records_the_expert(tmp_path):
+    """DART: the states leave the expert's path by centimetres, every label is the expert's own action, and
+    the hand is left alone at the grasp and the release."""
+    from lano3dp.data.collect import DartNoise
+    from lano3dp.sim import TabletopEnv
+
+    out = tmp_path / "dart.zarr"
+    collect("put_item_in_drawer", 1, out, image_size=64, n_points=16, dart_noise=0.03, progress=False)
+    store = EpisodeStore.open(out)
+    episode, seed = store.get_episode(0), store.attrs["episode_seeds"][0]
+    assert store.attrs["dart_noise"] == 0.03
+    env = TabletopEnv("put_item_in_drawer", image_size=64)
+    try:
+        env.reset(seed=seed)
+        expert = env.expert_plan().actions()
+    finally:
+        env.close()
+    length = len(episode["action"])
+    np.testing.assert_allclose(episode["action"], expert[:length], atol=1e-6)  # labels: the expert's
+    reached = episode["state"][1:, :3] - episode["action"][:-1, :3]
+    assert np.abs(reached).max() > 0.02  # the executed positions were not
+
+    weights = DartNoise(0.03, seed, expert).weights
+    changes = np.flatnonzero(np.abs(np.diff(expert[:, 9])) > 1e-3)
+    assert len(changes) >= 2  # a grasp and a release
+    for change in changes:
+        assert weights[max(change - DartNoise.QUIET_STEPS, 0): change + DartNoise.QUIET_STEPS + 1].max() == 0.0
+    assert weights.max() == 1.0
+    with __import__("pytest").raises(ValueError, match="dart_noise"):
+        collect("put_item_in_drawer", 1, tmp_path / "bad.zarr", dart_noise=0.5, progress=False)

@@ -15,6 +15,7 @@ from lano3dp.guidance.costs import (
     PointCloudObstacle,
     PositionCost,
     Sphere,
+    SweptBody,
     densify,
 )
 from lano3dp.guidance.fitting import fit_box, fit_cylinder
@@ -229,3 +230,47 @@ def test_metric_gradient_makes_the_push_isotropic_in_metres():
         np.testing.assert_allclose(metric_push, expected.double(), atol=1e-9)
     wrapped = MetricGradient(cylinder, scale)
     assert wrapped.clearance(pts((0.1, 0.0, 0.0))).item() == pytest.approx(0.05)
+
+
+def _descend(cost, positions: torch.Tensor, steps: int = 300, lr: float = 0.002) -> torch.Tensor:
+    """Plain gradient descent on metric waypoints: what guidance does to them, without a network."""
+    positions = positions.clone().requires_grad_(True)
+    for _ in range(steps):
+        (gradient,) = torch.autograd.grad(cost(positions).sum(), positions)
+        with torch.no_grad():
+            positions -= lr * gradient
+    return positions.detach()
+
+
+def test_swept_body_pushes_a_held_object_clear_in_metres():
+    """A bowl held by its rim hangs 7 cm beside the EE: the EE path clears the post, the bowl does not."""
+    post = Cylinder((0.0, 0.0), 0.03, margin=0.02)
+    offset, radius = torch.tensor([[-0.07, 0.0, 0.0]], dtype=torch.float64), 0.05
+    body = SweptBody(post, offset, [radius])
+    path = torch.stack([torch.full((21,), 0.12), torch.linspace(-0.3, 0.3, 21), torch.full((21,), 0.2)], -1)[None]
+    path = path.double()
+
+    def bowl_gap(positions):  # true gap (m) of the held ball to the post, from the geometry alone
+        centres = positions[0, :, :2] + offset[0, :2]
+        return (centres.norm(dim=-1) - 0.03 - radius).min().item()
+
+    assert post.clearance(path).min() > 0.08  # the EE point alone would never be pushed
+    assert bowl_gap(path) == pytest.approx(0.12 - 0.07 - 0.03 - 0.05)  # but the bowl cuts 3 cm into the post
+    assert body.clearance(path).min().item() == pytest.approx(bowl_gap(path), abs=1e-9)
+    pushed = _descend(body, path)
+    assert bowl_gap(pushed) >= 0.0  # clear, measured in metres
+    assert bowl_gap(pushed) >= 0.02 - 0.005  # and to within 5 mm of the margin
+    assert (pushed[0, :, 0] - path[0, :, 0]).max() > 0.04  # by moving the EE away from the post
+
+
+def test_swept_body_leaves_a_path_whose_held_object_hangs_away_from_the_obstacle():
+    """The same bowl hanging on the far side: clear, so nothing moves (the old ball of its diameter round
+    the EE pushed this path by the bowl's whole diameter)."""
+    post = Cylinder((0.0, 0.0), 0.03, margin=0.02)
+    body = SweptBody(post, [[0.07, 0.0, 0.0]], [0.05])
+    path = torch.stack([torch.full((21,), 0.12), torch.linspace(-0.3, 0.3, 21), torch.full((21,), 0.2)], -1)[None]
+    assert body(path.double()).abs().max().item() == 0.0
+    ball = Cylinder((0.0, 0.0), 0.03, margin=0.02, held_radius=body.reach)
+    assert ball(path.double()).max().item() > 0  # the sphere model of the same reach would push it
+    with pytest.raises(ValueError, match="radii"):
+        SweptBody(post, [[0.0, 0.0, 0.0]], [0.01, 0.02])

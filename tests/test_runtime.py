@@ -386,3 +386,74 @@ def test_observe_builds_a_frame_from_raw_arrays_when_the_env_has_none():
     assert state.dtype == np.float32
     with pytest.raises(ValueError, match="11"):
         observe(SimpleNamespace(), {**raw, "state": np.zeros(10)})
+
+
+def test_the_swept_body_is_the_hand_plus_the_held_object_while_it_is_grasped(observer):
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    obs, _ = env.reset(seed=0)
+    frame, _ = observe(env, obs)
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(), obstacle_phrases=["obstacle_0"],
+                          held_object="bowl")
+    model = runner.config.obstacle
+    assert model.body == "swept"
+    # the EE 3 cm above the bowl's rim, fingers along world y, gripper open: the hand alone
+    at_rim = np.array([BOWL.center_xy[0] + 0.05, BOWL.center_xy[1], 0.08])
+    free = np.concatenate([at_rim, ROT6D, [0.08, 0.0]]).astype(np.float32)
+    runner.push(frame, free)
+    offsets, radii = runner.swept_body(frame, free)
+    assert np.allclose(offsets[:, [0, 2]], 0) and np.abs(offsets[:, 1]).max() == pytest.approx(0.04)
+    assert runner.held_radius == pytest.approx(model.hand_half_span)
+    # grasped: one more ball, at the bowl's centre (5 cm behind the EE in x) with the bowl's radius
+    held = free.copy()
+    held[10] = 1.0
+    offsets, radii = runner.swept_body(frame, held)
+    assert len(radii) == len(model.hand_balls(ROT6D)[1]) + 1
+    np.testing.assert_allclose(offsets[-1, :2], [-0.05, 0.0], atol=0.015)
+    assert 0.04 <= radii[-1] <= 0.075
+    # a stale flag far from the bowl does not drag a ball across the table
+    far = held.copy()
+    far[:3] = [0.3, 0.2, 0.3]
+    assert len(runner.swept_body(frame, far)[1]) == len(model.hand_balls(ROT6D)[1])
+    with pytest.raises(ValueError, match="sphere"):
+        ObstacleModel(held_radius=0.05)
+
+
+def test_a_target_the_obstacle_mostly_covers_in_the_first_frame_keeps_the_cloud_of_what_shows(observer):
+    """A post over the bowl leaves 4 of its pixels in view (the observer wants 10): the first cloud is taken
+    from those, and every later frame, where the bowl stays hidden, keeps it instead of failing."""
+    post = Box("obstacle_0", BOWL.center_xy, (0.10, 0.12, 0.30), {"kind": "cylinder", "color": "grey",
+                                                                  "role": "obstacle"})
+    env = FakeEnv([BOWL, PAN, post], max_steps=6, success_radius=-1.0)
+    visible = np.isin(env.frame_.segmentation, env.frame_.instance_names["bowl"]).sum()
+    assert 3 <= visible < observer.min_points
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=2))
+    result = rollout(env, runner, seed=0, stop_on_success=False)
+    assert result.error is None and result.steps == 6
+    assert result.partly_hidden == ["bowl"]
+    assert result.held_clouds >= 2  # the re-plans kept the first cloud
+    # the few points are the bowl's own: its first centroid is within the bowl's half-size of its centre
+    assert np.linalg.norm(np.array(result.targets["bowl"][:2]) - BOWL.center_xy) < 0.06
+
+    hidden = Box("obstacle_0", (BOWL.center_xy[0] + 0.005, 0.0), (0.10, 0.12, 0.30), post.attributes)
+    env = FakeEnv([BOWL, PAN, hidden], max_steps=6)
+    assert not np.isin(env.frame_.segmentation, env.frame_.instance_names.get("bowl", [-1])).any()
+    result = rollout(env, PolicyRunner(FakePolicy(), observer), seed=0)
+    assert result.steps == 0 and "ObjectNotFoundError" in result.error  # nothing to keep: an honest failure
+
+
+def test_guide_when_needed_keeps_the_policys_own_chunk_while_it_clears_the_obstacle(observer):
+    guidance = GuidanceConfig(mode="clean", scale=1.0, last_steps=10)
+    config = RuntimeConfig(guidance=guidance, obstacle=ObstacleModel(body="sphere", held_radius=0.03),
+                           guide_when_needed=True)
+    side_post = Box("obstacle_0", (0.02, 0.25), (0.06, 0.06, 0.30), OBSTACLE.attributes)  # far off the line
+    policy = FakePolicy()
+    clear = rollout(FakeEnv([BOWL, PAN, side_post]), PolicyRunner(policy, observer, config,
+                                                                   obstacle_phrases=["obstacle_0"]), seed=0)
+    assert clear.success and all(call["guidance"] is None for call in policy.calls)  # never guided
+    assert all(tries == 1 for tries in clear.chunk_tries)
+
+    policy = FakePolicy()
+    blocked = rollout(FakeEnv([BOWL, PAN, OBSTACLE]), PolicyRunner(policy, observer, config,
+                                                                   obstacle_phrases=["obstacle_0"]), seed=0)
+    assert not blocked.collided and blocked.min_clearance > 0  # guided where the own chunk would hit
+    assert any(call["guidance"] is guidance for call in policy.calls) and 2 in blocked.chunk_tries

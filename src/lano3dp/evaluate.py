@@ -80,6 +80,7 @@ class EvalConfig:
         obstacle_scenes_only: with an obstacle variation, evaluate the first `episodes` seeds from `seed` whose
             scene has room for every obstacle asked for (chosen from the layout alone, never from an outcome).
         refit_obstacles: re-segment and re-fit the obstacles before every chunk (moving obstacles).
+        guide_when_needed: guide a chunk only when the policy's own one comes within the margin of an obstacle.
         body: what guidance keeps clear: "swept" (hand and held object as balls re-measured every chunk) or
             "sphere" (the paper: one ball of held_radius round the EE point); see `runtime.ObstacleModel`.
         n_action_steps: actions executed per chunk (None: the policy's).
@@ -132,6 +133,7 @@ class EvalConfig:
     body: str = "swept"
     obstacle_scenes_only: bool = False
     refit_obstacles: bool = False
+    guide_when_needed: bool = False
 
     def __post_init__(self):
         self.checkpoint = str(self.checkpoint)
@@ -265,7 +267,8 @@ def runtime_config(config: EvalConfig, seed: int):
         obstacle=ObstacleModel(margin=config.margin, body=config.body, held_radius=config.held_radius,
                                refit_every_chunk=config.refit_obstacles),
         checked=CheckConfig(initial_scale=max(config.rho, 1e-3), densify=config.densify) if config.checked else None,
-        metric_gradient=config.metric_gradient, densify=config.densify, seed=seed)
+        metric_gradient=config.metric_gradient, densify=config.densify, guide_when_needed=config.guide_when_needed,
+        seed=seed)
 
 
 # ---- one process: policy + env + episodes ---------------------------------------------------------

@@ -46,9 +46,12 @@ from lano3dp.guidance.costs import (
 )
 from lano3dp.guidance.fitting import fit_box, fit_cylinder
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
-from lano3dp.perception.exceptions import PerceptionError
+from lano3dp.perception.exceptions import PerceptionError, TooFewPointsError
 
 OBSTACLE_SHAPES = ("cylinder", "box", "points")
+# Points enough for a first-frame target cloud that an obstacle mostly hides (FPS repeats them to N): its
+# centroid is still the object's, where failing the episode would be certain.
+FIRST_FRAME_MIN_POINTS = 3
 BODY_MODELS = ("swept", "sphere")
 GRASP_FLAG = 10  # index of the grasp flag in the 11-D robot state
 
@@ -146,6 +149,8 @@ class RuntimeConfig:
             normalised units; with it rho reads as metres per guided step.
         densify: cost (and check) the path with `densify - 1` extra points inside each segment, so a segment
             cannot straddle a thin obstacle between two clear waypoints (`guidance.costs.Densified`; 1 = off).
+        guide_when_needed: sample the policy's own chunk first and guide only when its horizon comes closer
+            than the margin to an obstacle (one extra unguided sample per chunk near obstacles; beyond the paper).
         seed: seeds the sampling noise (one torch.Generator per runner, re-seeded on reset).
     """
 
@@ -158,6 +163,7 @@ class RuntimeConfig:
     on_unclear: str = "execute"
     metric_gradient: bool = False
     densify: int = 1
+    guide_when_needed: bool = False
     seed: int = 0
 
     def __post_init__(self):
@@ -309,6 +315,7 @@ class PolicyRunner:
         self.held_radius: float | None = None
         self.step_count = 0
         self.held_clouds = 0  # frames in which a hidden target kept its previous cloud
+        self.partly_hidden: list[str] = []  # targets taken from a few points in the first frame
         self._last_clouds: np.ndarray | None = None
         self._held_ball: tuple[np.ndarray, float] | None = None  # (offset from the EE, radius) of the held object
         self.initial_targets: dict[str, list[float]] = {}  # phrase -> centroid (m) in the first frame
@@ -326,6 +333,7 @@ class PolicyRunner:
         self.held_radius = None
         self.step_count = 0
         self.held_clouds = 0
+        self.partly_hidden = []
         self._last_clouds = None
         self._held_ball = None
         self.initial_targets = {}
@@ -368,15 +376,20 @@ class PolicyRunner:
     def object_clouds(self, frame: RGBDFrame) -> np.ndarray:
         """(K, N, 3) target clouds in slot order.
 
-        A target that is momentarily hidden (too few points, e.g. the pan under the tilted bowl) keeps its
-        previous cloud, as a video tracker would and as the demonstrations were recorded
-        (`data.collect`); a target missing from the first frame is an error the caller sees.
+        A target that is momentarily hidden (too few points, e.g. the pan under the tilted bowl, or behind an
+        obstacle) keeps its previous cloud, as a video tracker would and as the demonstrations were recorded
+        (`data.collect`). In the first frame a target with only a few points in view is taken from those;
+        one not in view at all is an error the caller sees.
         """
         try:
             clouds = self.observer.observe(frame, self.target_phrases).points
         except PerceptionError:
             if self._last_clouds is None:
-                raise
+                clouds = self._first_clouds(frame)
+                self._last_clouds = clouds
+                self.initial_targets = {phrase: clouds[k].mean(0).round(4).tolist()
+                                        for k, phrase in enumerate(self.target_phrases)}
+                return clouds
             clouds = []
             for slot, phrase in enumerate(self.target_phrases):
                 try:
@@ -390,6 +403,18 @@ class PolicyRunner:
                                     for k, phrase in enumerate(self.target_phrases)}
         self._last_clouds = clouds
         return clouds
+
+    def _first_clouds(self, frame: RGBDFrame) -> np.ndarray:
+        """The first frame's target clouds; a target the obstacle mostly hides is taken from the few points
+        still in view (FIRST_FRAME_MIN_POINTS) rather than failing the episode: there is no earlier cloud."""
+        clouds = []
+        for phrase in self.target_phrases:
+            try:
+                clouds.append(self.observer.observe(frame, [phrase]).points[0])
+            except TooFewPointsError:
+                clouds.append(self.observer.observe(frame, [phrase], min_points=FIRST_FRAME_MIN_POINTS).points[0])
+                self.partly_hidden.append(phrase)
+        return np.stack(clouds)
 
     def push(self, frame: RGBDFrame, state: np.ndarray) -> None:
         """Add one observation (frame, state (11,)) to the window; the first one also fits the obstacles,
@@ -456,8 +481,8 @@ class PolicyRunner:
             offset = np.array([*held.center.tolist(), (held.z_min + held.z_max) / 2]) - state[:3]
             # a flag set while the named object is nowhere near the hand (another object is held, or the
             # env's flag is stale) must not drag a ball across the table with the hand
-            if np.linalg.norm(offset) - held.radius <= self.config.obstacle.hand_half_span:
-                self._held_ball = (offset, held.radius)
+            near = np.linalg.norm(offset) - held.radius <= self.config.obstacle.hand_half_span
+            self._held_ball = (offset, held.radius) if near else None
         except (PerceptionError, EmptyCloudError):
             pass  # keep the ball measured before the hand covered the object
         if self._held_ball is None:
@@ -510,7 +535,19 @@ class PolicyRunner:
             record.clear = result.success
             record.predicted_clearance = float(result.min_clearance.min())
         else:
-            chunk = sample(guidance)
+            chunk = None
+            if guidance is not None and cfg.guide_when_needed:
+                # the policy's own chunk, kept when its whole horizon already clears every obstacle by the
+                # margin: guidance then never bends a grasp that was not heading for the obstacle
+                plain = sample(None)
+                start = self.policy_config.n_obs_steps - 1
+                with torch.no_grad():
+                    gap = float(cost.clearance(plain.trajectory[:, start:, :3].float()).min())
+                if gap >= self.config.obstacle.margin:
+                    chunk, guidance = plain, None
+                record.tries = 1 if chunk is not None else 2
+            if chunk is None:
+                chunk = sample(guidance)
             record.scale = guidance.scale if guidance is not None else 0.0
             if cost is not None:
                 with torch.no_grad():
@@ -558,6 +595,7 @@ class EpisodeResult:
         obstacles: the fitted obstacle shapes the runner guided against (see `describe_obstacle`).
         held_radius: m, the held extent used in Q*.
         held_clouds: target clouds carried over from the previous frame because the target was hidden.
+        partly_hidden: targets whose first-frame cloud came from the few points an obstacle left in view.
         targets: phrase -> centroid (m) of each target's cloud in the first frame (object policies).
         error: why the episode ended early (perception failure, no clear chunk), or None.
         wall_s: wall time of the episode, seconds.
@@ -580,6 +618,7 @@ class EpisodeResult:
     obstacles: list[dict[str, Any]] = field(default_factory=list)
     held_radius: float | None = None
     held_clouds: int = 0
+    partly_hidden: list[str] = field(default_factory=list)
     targets: dict[str, list[float]] = field(default_factory=dict)
     error: str | None = None
     wall_s: float = 0.0
@@ -690,7 +729,7 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
                                    for c in runner.chunks],
         ee_path=ee_path,
         obstacles=[describe_obstacle(o) for o in runner.obstacles] if runner.obstacles is not None else [],
-        held_radius=runner.held_radius, held_clouds=runner.held_clouds,
+        held_radius=runner.held_radius, held_clouds=runner.held_clouds, partly_hidden=list(runner.partly_hidden),
         targets=dict(runner.initial_targets), error=error,
         wall_s=time.perf_counter() - started,
         # The env latches stages, so its last info holds every stage reached in the episode.

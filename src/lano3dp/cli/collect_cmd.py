@@ -20,6 +20,9 @@ def collect_command(
     n_points: int = typer.Option(64, "--n-points", min=1,
                                  help="Points per object cloud (the default policy trains on 64; record more to "
                                       "train on more)."),
+    dart_noise: float = typer.Option(0.0, "--dart-noise", min=0.0, max=0.1,
+                                     help="Noise injection (DART): spread (m) of a smooth offset added to the "
+                                          "executed positions while the expert's own actions are recorded."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
 ) -> None:
     """Record scripted-expert demonstrations (only successful episodes are kept) into a zarr dataset."""
@@ -30,7 +33,7 @@ def collect_command(
     _options.variation(variation)
     _options.output_path(out, folder=True)
     result = collect(task, episodes, out, variation=variation, seed=seed, image_size=image_size,
-                     n_points=n_points, progress=progress)
+                     n_points=n_points, dart_noise=dart_noise, progress=progress)
     failed = f", {len(result.failed_seeds)} expert failures skipped (seeds {result.failed_seeds})" \
         if result.failed_seeds else ""
     typer.echo(f"{result.path}: added {result.added} episodes ({result.steps} steps) in {result.seconds:.1f} s; "

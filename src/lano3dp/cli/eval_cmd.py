@@ -41,6 +41,8 @@ def eval_command(
     obstacle_scenes_only: bool = typer.Option(False, help="With an obstacle variation: the first --episodes seeds "
                                                           "whose scene has room for its obstacles."),
     refit_obstacles: bool = typer.Option(False, help="Re-fit obstacles before every chunk (moving obstacles)."),
+    guide_when_needed: bool = typer.Option(False, help="Guide a chunk only when the policy's own one comes within "
+                                                       "the margin of an obstacle."),
     body: str = typer.Option("swept", help="What guidance keeps clear: swept (hand + held object, re-measured "
                                           "every chunk) | sphere (the paper: one ball round the EE point)."),
     held_radius: float = typer.Option(None, help="--body sphere: its radius (m) in Q*; default: measured from the "
@@ -92,6 +94,7 @@ def eval_command(
         per_train_step=per_train_step, metric_gradient=metric_push, densify=densify, scheduler=scheduler, steps=steps,
         checked=checked, margin=margin,
         body=body, obstacle_scenes_only=obstacle_scenes_only, refit_obstacles=refit_obstacles,
+        guide_when_needed=guide_when_needed,
         held_radius=held_radius, max_steps=max_steps, workers=workers,
         video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out),
         segmenter=segmenter, detector=detector, detector_dir=str(detector_dir) if detector_dir else None,

@@ -16,6 +16,14 @@ succeeds. Episode i (0-based, in the store) uses the first successful seed among
 the same whether it was collected in one run or resumed: re-running with the same output
 appends only the missing episodes (the store's episode count says how many exist).
 
+Noise injection (DART, Laskey et al. 2017; `dart_noise` > 0): the executed action is the expert's plus a
+smooth random offset of the position (an Ornstein-Uhlenbeck process, `dart_noise` metres stationary
+spread, one second correlation, half as much in z), while the recorded action stays the expert's own.
+The stored states then include positions off the expert's path, each labelled with the way back, which
+a plain expert never shows: a policy pushed off its path (an obstacle detour) has seen how to return.
+The offset fades out below 12 cm above the table and within a second of the expert closing or opening
+the gripper, so grasps and placements stay the expert's own.
+
 Occlusion: when an object has fewer than `min_points` visible points in a frame (e.g. the pan
 under the tilted bowl), its cloud from the previous step is reused, as a video tracker would
 hold it; a slot missing in the first frame discards the episode. The count of such frames is
@@ -62,6 +70,7 @@ class CollectConfig:
     crop_high: tuple[float, float, float] = CROP_HIGH
     min_points: int = 10
     max_steps: int | None = None  # episode limit (default: the task's); an expert that needs more fails
+    dart_noise: float = 0.0  # m, spread of the injected position offset (0: the expert as it is)
     progress: bool = True
 
     def __post_init__(self):
@@ -69,6 +78,8 @@ class CollectConfig:
         for name in ("episodes", "image_size", "n_points", "scene_points", "rgb_size", "min_points"):
             if getattr(self, name) < 1:
                 raise ValueError(f"CollectConfig: {name} must be >= 1, got {getattr(self, name)}")
+        if not 0 <= self.dart_noise <= 0.1:
+            raise ValueError(f"CollectConfig: dart_noise is metres in [0, 0.1], got {self.dart_noise}")
         if self.max_steps is not None and self.max_steps < 1:
             raise ValueError(f"CollectConfig: max_steps must be >= 1, got {self.max_steps}")
 
@@ -133,10 +144,11 @@ def _collect_episodes(config: CollectConfig) -> CollectResult:
         "base_seed": config.seed,
         "seed_stride": SEED_STRIDE,
         "source": "scripted expert, successful episodes only",
+        "dart_noise": config.dart_noise,
     }
     store = EpisodeStore.open_or_create(config.out, attrs)
     existing = store.attrs
-    for key in ("task", "variation", "n_points", "base_seed"):
+    for key in ("task", "variation", "n_points", "base_seed", "dart_noise"):
         if key in existing and existing[key] != attrs[key]:
             raise CollectionError(f"{config.out} was collected with {key}={existing[key]!r}, not {attrs[key]!r}; "
                                   "use another --out or the same settings to resume")
@@ -186,6 +198,7 @@ def record_episode(env, observer, seed: int, config: CollectConfig) -> tuple[dic
     last_clouds: list[np.ndarray | None] = [None] * len(phrases)
     held = 0
     success = False
+    noise = DartNoise(config.dart_noise, seed, actions)
     for t in range(env.max_steps):
         frame = env.frame()
         try:
@@ -208,7 +221,7 @@ def record_episode(env, observer, seed: int, config: CollectConfig) -> tuple[dic
         rows["scene_cloud"].append(scene_cloud(frame, config.scene_points, config.crop_low, config.crop_high,
                                                table_height=0.0))
         rows["rgb"].append(resize_rgb(obs["rgb"], config.rgb_size))
-        obs, _, terminated, truncated, info = env.step(action)
+        obs, _, terminated, truncated, info = env.step(noise.perturb(action, t))
         if terminated:
             success = True
             break
@@ -220,6 +233,38 @@ def record_episode(env, observer, seed: int, config: CollectConfig) -> tuple[dic
     for key in ("action", "state", "object_clouds", "scene_cloud"):
         episode[key] = episode[key].astype(np.float32)
     return episode, held
+
+
+class DartNoise:
+    """The smooth position offset of noise injection (see the module docstring); zero spread: no offset."""
+
+    CORRELATION_S = 1.0
+    FADE_HEIGHT = (0.06, 0.12)  # m above the table: no offset below the first height, all of it above the second
+    QUIET_STEPS, FADE_STEPS = 4, 6  # no offset this close to a gripper change, all of it QUIET + FADE away
+
+    def __init__(self, spread: float, seed: int, actions: np.ndarray):
+        self.spread = float(spread)
+        self.rng = np.random.default_rng([int(seed), 0xDA27])
+        self.keep = float(np.exp(-1.0 / (CONTROL_HZ * self.CORRELATION_S)))
+        self.offset = np.zeros(3)
+        self.scale = np.array([1.0, 1.0, 0.5]) * self.spread
+        actions = np.asarray(actions, dtype=np.float64)
+        low, high = self.FADE_HEIGHT
+        height = np.clip((actions[:, 2] - low) / (high - low), 0.0, 1.0)
+        changes = np.flatnonzero(np.abs(np.diff(actions[:, 9])) > 1e-3)
+        steps = np.arange(len(actions))
+        distance = np.abs(steps[:, None] - changes[None, :]).min(1) if len(changes) else np.full(len(actions), 1e9)
+        quiet = np.clip((distance - self.QUIET_STEPS) / self.FADE_STEPS, 0.0, 1.0)
+        self.weights = height * quiet
+
+    def perturb(self, action: np.ndarray, step: int) -> np.ndarray:
+        if self.spread <= 0:
+            return action
+        fresh = self.rng.standard_normal(3) * self.scale
+        self.offset = self.keep * self.offset + np.sqrt(1.0 - self.keep**2) * fresh
+        perturbed = np.array(action, dtype=np.float32, copy=True)
+        perturbed[:3] += self.weights[min(step, len(self.weights) - 1)] * self.offset
+        return perturbed
 
 
 def resize_rgb(rgb: np.ndarray, size: int) -> np.ndarray:

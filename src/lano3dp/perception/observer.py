@@ -83,8 +83,8 @@ class ObjectObserver:
         self.min_points = min_points
         self.seed = seed
 
-    def observe(self, frame: RGBDFrame, phrases: Sequence[str]) -> ObjectClouds:
-        """Clouds of `phrases` in `frame`.
+    def observe(self, frame: RGBDFrame, phrases: Sequence[str], *, min_points: int | None = None) -> ObjectClouds:
+        """Clouds of `phrases` in `frame` (`min_points` overrides the observer's own threshold).
 
         Raises:
             ObjectNotFoundError: a phrase matched nothing visible (names the phrase and what was seen).
@@ -99,7 +99,7 @@ class ObjectObserver:
             raise RuntimeError(f"segmenter returned {len(results)} results for {len(phrases)} phrases")
         clouds, counts = [], []
         for result in results:
-            cloud, count = self.cloud_from_mask(frame, result)
+            cloud, count = self.cloud_from_mask(frame, result, min_points=min_points)
             clouds.append(cloud)
             counts.append(count)
         return ObjectClouds(
@@ -143,17 +143,19 @@ class ObjectObserver:
             masks=tuple(r.mask for r in results),
         )
 
-    def cloud_from_mask(self, frame: RGBDFrame, result: MaskResult) -> tuple[np.ndarray, int]:
+    def cloud_from_mask(self, frame: RGBDFrame, result: MaskResult, *,
+                        min_points: int | None = None) -> tuple[np.ndarray, int]:
         """(N, 3) float32 FPS cloud of one segmented object and its valid point count before sampling."""
         if not result.found:
             raise ObjectNotFoundError(result.phrase, result.visible)
         points = depth_to_points(frame.depth, frame.camera, result.mask)
         if self.crop_low is not None:
             points = crop_to_box(points, self.crop_low, self.crop_high)
-        if len(points) < self.min_points:
+        needed = self.min_points if min_points is None else max(1, int(min_points))
+        if len(points) < needed:
             same = result.matched_name in (None, result.phrase)
             label = result.phrase if same else f"{result.phrase} [{result.matched_name}]"
-            raise TooFewPointsError(label, len(points), self.min_points)
+            raise TooFewPointsError(label, len(points), needed)
         return farthest_point_sample(points, self.n_points, seed=self.seed, name=result.phrase), len(points)
 
 

@@ -10,6 +10,7 @@ Per task, the policy packaged for it (`lano3dp eval --task T` without --checkpoi
                   object's diameter round the EE point, waypoints only
         default   the project's: A_0|k, the policy's DDIM, every step guided, rho 0.04 m per guided step
                   (`MetricGradient`), segments densified x4, the hand and the held object as a swept body
+        sphere    the default with the previous body model (a ball of the held object's diameter round the EE)
   - and, with the default sampler (and none beside it), the harder rows of `--extra-variations`: a box,
     a cluster of two, two obstacles, one that moves (re-fitted before every chunk).
 Obstacle episodes use the first seeds from 1000000 whose layout has room for the obstacles (chosen from the
@@ -46,6 +47,7 @@ SAMPLERS = {
     "paper": {"guidance": "clean", "scheduler": "ddpm", "steps": 100, "last_steps": 10, "metric_gradient": False,
               "rho": 4.0, "densify": 1, "body": "sphere"},
     "default": {"guidance": "clean"},
+    "sphere": {"guidance": "clean", "body": "sphere"},  # the default before the swept body: the ablation of it
 }
 FAILURE_CLASSES = ("target not seen", "touched the obstacle", "grasp missed", "lost on the carry",
                    "last stage unfinished", "other")
@@ -91,6 +93,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--extra-variations", default="obstacle:moving,obstacle:2,obstacle:box,obstacle:cluster",
                         help="harder rows, default sampler and none")
     parser.add_argument("--extra-tasks", default="bowl_pour", help="tasks of the harder rows")
+    parser.add_argument("--policy", action="append", default=[], metavar="TASK=PATH",
+                        help="evaluate this checkpoint or training run for TASK instead of the packaged policy")
     parser.add_argument("--seed", type=int, default=1_000_000)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--work", default="bench/out/obstacles")
@@ -130,6 +134,7 @@ def main(argv=None) -> int:
     extra_variations = [v for v in args.extra_variations.split(",") if v]
     extra_tasks = [t for t in args.extra_tasks.split(",") if t]
     work = Path(args.work)
+    policies = dict(item.split("=", 1) for item in args.policy)
     command = shlex.join(["python", "bench/bench_obstacles.py", *(argv if argv is not None else sys.argv[1:])])
     started = time.perf_counter()
 
@@ -139,7 +144,7 @@ def main(argv=None) -> int:
     def evaluate(task: str, variation: str, name: str, sampler: str) -> tuple[dict, list[dict]] | None:
         out = work / task / f"{name}.json"
         options = dict(SAMPLERS[sampler])
-        config = EvalConfig(checkpoint=str(packaged_checkpoint(task)), task=task, variation=variation,
+        config = EvalConfig(checkpoint=policies.get(task) or str(packaged_checkpoint(task)), task=task, variation=variation,
                             episodes=args.episodes, seed=args.seed, workers=args.workers, out=str(out),
                             obstacle_scenes_only=variation != "clean", refit_obstacles="moving" in variation,
                             **options)
@@ -154,7 +159,7 @@ def main(argv=None) -> int:
             result = eval_stage(config, log=log, command=command)
         return result["summary"], result["episodes"]
 
-    results: dict = {"command": command, "config": vars(args), "samplers": SAMPLERS, "tasks": {},
+    results: dict = {"command": command, "config": vars(args), "samplers": SAMPLERS, "policies": policies, "tasks": {},
                      "machine": {"platform": platform.platform(), "python": platform.python_version(),
                                  "note": "2-core CPU shared with other jobs: latencies are pessimistic"}}
     out_json = ROOT / "results" / f"obstacles{args.tag}.json"
@@ -190,7 +195,9 @@ def _interval(values) -> str:
 
 def markdown_report(results: dict) -> str:
     lines = ["# Obstacle avoidance that keeps the task", "", f"Command: `{results['command']}`", "",
-             "Policies: the packaged ones (`src/lano3dp/checkpoints/<task>`, training seed 0, see their "
+             "Policies: " + (", ".join(f"{t}: `{p}`" for t, p in results["policies"].items()) + "; others: " if
+                             results["policies"] else "") +
+             "the packaged ones (`src/lano3dp/checkpoints/<task>`, training seed 0, see their "
              "record.json). Obstacle rows: the first seeds from 1000000 whose layout has room for the obstacles; "
              "clean: seeds 1000000 + i. Intervals: 95% Wilson. touch = any contact of hand or held object with "
              "an obstacle; contact steps = steps with contact (mean over episodes); clearance = the simulator's "

@@ -65,10 +65,12 @@ def test_eval_cli_writes_results_with_the_documented_fields(trained):
     path = np.asarray(episode["ee_path"])
     assert path.shape == (episode["steps"] + 1, 3)
     assert episode["path_length"] == pytest.approx(np.linalg.norm(np.diff(path, axis=0), axis=1).sum(), rel=1e-4)
-    # the scene's obstacle was segmented and fitted: a cylinder of a few cm, Q* beyond its radius
+    # the scene's obstacle was segmented and fitted: a cylinder of a few cm, bare (the swept body carries the
+    # hand and held object, reaching at least the hand's half span from the EE)
     (obstacle,) = episode["obstacles"]
     assert obstacle["shape"] == "Cylinder" and 0.01 < obstacle["radius"] < 0.08
-    assert obstacle["safety_distance"] > obstacle["radius"] + 0.02
+    assert obstacle["safety_distance"] == pytest.approx(obstacle["radius"] + 0.02, abs=1e-4)
+    assert episode["held_radius"] >= 0.065 - 1e-6
     assert episode["min_clearance"] is not None and np.isfinite(episode["min_clearance"])
     assert episode["collided"] == (episode["n_collision_steps"] > 0)
     assert all(c is not None for c in episode["chunk_predicted_clearance"])

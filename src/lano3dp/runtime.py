@@ -316,6 +316,7 @@ class PolicyRunner:
         self.step_count = 0
         self.held_clouds = 0  # frames in which a hidden target kept its previous cloud
         self.partly_hidden: list[str] = []  # targets taken from a few points in the first frame
+        self.stale_obstacle_fits = 0  # re-fits skipped because the obstacle was out of view
         self._last_clouds: np.ndarray | None = None
         self._held_ball: tuple[np.ndarray, float] | None = None  # (offset from the EE, radius) of the held object
         self.initial_targets: dict[str, list[float]] = {}  # phrase -> centroid (m) in the first frame
@@ -334,6 +335,7 @@ class PolicyRunner:
         self.step_count = 0
         self.held_clouds = 0
         self.partly_hidden = []
+        self.stale_obstacle_fits = 0
         self._last_clouds = None
         self._held_ball = None
         self.initial_targets = {}
@@ -425,9 +427,15 @@ class PolicyRunner:
         if not self.obstacle_phrases:
             return
         model, planning = self.config.obstacle, not self.queue
-        if self.obstacles is None or (model.refit_every_chunk and planning):
+        if self.obstacles is None:
             self.obstacles = self.fit_obstacles(frame)
             self.obstacle_cost = None
+        elif model.refit_every_chunk and planning:
+            try:
+                self.obstacles = self.fit_obstacles(frame)
+                self.obstacle_cost = None
+            except (PerceptionError, EmptyCloudError):
+                self.stale_obstacle_fits += 1  # the arm hides it now: keep the last fit
         if self.obstacle_cost is None or (model.body == "swept" and planning):
             self.obstacle_cost = self.guidance_cost(frame, state)
 

@@ -6,9 +6,32 @@ from pathlib import Path
 
 import typer
 
+_ENV_HELP = ("Your own simulator or robot: module:factory or path/to/file.py:factory (called as `lano3dp eval` "
+             "calls it), returning an env meeting lano3dp.sim.protocol (default: the built-in simulator).")
+
+
+def _names(text: str) -> list[str]:
+    names = [name.strip() for name in text.split(",") if name.strip()]
+    if not names:
+        raise typer.BadParameter("give slot names separated by commas, e.g. block,drawer", param_hint="--slots")
+    return names
+
+
+def _point(text: str | None, option: str) -> tuple[float, float, float] | None:
+    if text is None:
+        return None
+    try:
+        point = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        point = ()
+    if len(point) != 3:
+        raise typer.BadParameter(f"{text!r}: give x,y,z in metres, e.g. -0.5,-0.5,0.0", param_hint=option)
+    return point
+
 
 def collect_command(
-    task: str = typer.Option(..., "--task", help="Task name, e.g. bowl_pour (see `lano3dp tasks`)."),
+    task: str = typer.Option(None, "--task", help="Task name, e.g. bowl_pour (see `lano3dp tasks`); with --env, the "
+                                                  "name the dataset and its policy carry (default: the env's)."),
     episodes: int = typer.Option(40, "--episodes", min=1, help="Episodes the dataset should hold; an existing dataset "
                                                         "at --out is resumed and only missing ones are added."),
     out: Path = typer.Option(..., "--out", help="Zarr dataset folder to create or append to."),
@@ -24,16 +47,48 @@ def collect_command(
                                      help="Noise injection (DART): spread (m) of a smooth offset added to the "
                                           "executed positions while the expert's own actions are recorded."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
+    env: str = typer.Option(None, "--env", help=_ENV_HELP),
+    expert: str = typer.Option(None, "--expert", help="With --env: module:callable or path/to/file.py:callable, "
+                                                      "expert(env, obs, info) -> action (10,), called every step "
+                                                      "(a class is instantiated once; its reset(env, obs, info) "
+                                                      "runs after each env reset). Default: env.expert_plan()."),
+    slots: str = typer.Option(None, "--slots", help="With --env: the policy's object slots, comma-separated "
+                                                    "(e.g. block,drawer); default: env.task.object_slots."),
+    control_hz: float = typer.Option(None, "--control-hz", min=0.0, help="With --env: its control rate "
+                                                                         "(default: env.control_hz)."),
+    max_steps: int = typer.Option(None, "--max-steps", min=1, help="Step limit of an expert episode "
+                                                                   "(default: the task's or env.max_steps)."),
+    table_height: float = typer.Option(0.0, "--table-height", help="World z (m) of the table top."),
+    crop_low: str = typer.Option(None, "--crop-low", help="With --env: x,y,z (m) of the cloud crop box's low "
+                                                          "corner (default: no crop)."),
+    crop_high: str = typer.Option(None, "--crop-high", help="With --env: x,y,z (m) of its high corner."),
 ) -> None:
-    """Record scripted-expert demonstrations (only successful episodes are kept) into a zarr dataset."""
+    """Record expert demonstrations (only successful episodes are kept) into a zarr dataset."""
     from lano3dp.cli import _options
-    from lano3dp.data.collect import collect
+    from lano3dp.data.collect import collect, collect_from_env
 
-    _options.task_name(task)
-    _options.variation(variation)
     _options.output_path(out, folder=True)
-    result = collect(task, episodes, out, variation=variation, seed=seed, image_size=image_size,
-                     n_points=n_points, dart_noise=dart_noise, progress=progress)
+    if env is None:
+        if task is None:
+            raise typer.BadParameter("give a task of the built-in simulator, or --env", param_hint="--task")
+        if any(v is not None for v in (expert, slots, control_hz, crop_low, crop_high)):
+            raise typer.BadParameter("--expert, --slots, --control-hz and --crop-low/high need --env",
+                                     param_hint="--env")
+        _options.task_name(task)
+        _options.variation(variation)
+        result = collect(task, episodes, out, variation=variation, seed=seed, image_size=image_size,
+                         n_points=n_points, dart_noise=dart_noise, progress=progress, max_steps=max_steps,
+                         table_height=table_height)
+    else:
+        _options.env_factory(env)
+        _options.env_factory(expert, "--expert")
+        if (crop_low is None) != (crop_high is None):
+            raise typer.BadParameter("give both --crop-low and --crop-high, or neither", param_hint="--crop-low")
+        result = collect_from_env(env, expert, episodes, out, task=task, variation=variation, seed=seed,
+                                  image_size=image_size, n_points=n_points, progress=progress,
+                                  slots=None if slots is None else _names(slots), control_hz=control_hz,
+                                  max_steps=max_steps, table_height=table_height,
+                                  crop_low=_point(crop_low, "--crop-low"), crop_high=_point(crop_high, "--crop-high"))
     failed = f", {len(result.failed_seeds)} expert failures skipped (seeds {result.failed_seeds})" \
         if result.failed_seeds else ""
     typer.echo(f"{result.path}: added {result.added} episodes ({result.steps} steps) in {result.seconds:.1f} s; "

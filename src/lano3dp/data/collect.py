@@ -1,17 +1,24 @@
-"""Scripted-expert demonstrations -> zarr episode store (`lano3dp collect`).
+"""Expert demonstrations -> zarr episode store (`lano3dp collect`).
 
-Each episode runs the task's scripted expert in `TabletopEnv` and records, per control step,
-the observation before the action and the action:
+Each episode runs an expert in an environment and records, per control step, the observation
+before the action and the action. The environment is the built-in `TabletopEnv` of a task (its
+scripted open-loop plan the expert), or any env meeting `lano3dp.sim.protocol.SimulatorProtocol`
+with a closed-loop expert `expert(env, obs, info) -> action (10,)` called every step
+(`collect_from_env`; on the command line `lano3dp collect --env module:factory --expert module:callable
+--slots block,drawer`). For a user's env the slots, control rate and step limit come from the caller or
+the env (`env.control_hz`, `env.max_steps`), the frame from `runtime.observe` (obs["frame"], env.frame(),
+or obs rgb/depth/intrinsics/cam_to_world), and success from `info["success"]`. Recorded:
 
     action          (10,) float32   absolute EE pose + gripper the expert commanded
     state           (11,) float32   EE pose, gripper opening, grasp flag
-    object_clouds   (K, N, 3)       per-slot clouds (slot order = task.object_slots), ground-truth
-                                    segmentation through `perception.ObjectObserver` + `SimOracleSegmenter`
-    scene_cloud     (512, 3)        cropped scene without the table (DP3 baseline)
+    object_clouds   (K, N, 3)       per-slot clouds (slot order = task.object_slots or the slots given),
+                                    ground-truth segmentation through `perception.ObjectObserver` +
+                                    `SimOracleSegmenter` (phrases: info["target_phrases"][slot], else the slot)
+    scene_cloud     (512, 3)        cropped scene above the table height (DP3 baseline)
     rgb             (96, 96, 3)     uint8 (Diffusion Policy baseline)
 
-Only successful expert episodes are kept; an episode ends at the step the task first
-succeeds. Episode i (0-based, in the store) uses the first successful seed among
+Only successful expert episodes are kept; an episode ends at the step info["success"] first
+becomes true. Episode i (0-based, in the store) uses the first successful seed among
 `seed + i`, `seed + i + SEED_STRIDE`, `seed + i + 2 * SEED_STRIDE`, ... so the dataset is
 the same whether it was collected in one run or resumed: re-running with the same output
 appends only the missing episodes (the store's episode count says how many exist).
@@ -32,9 +39,12 @@ kept in the store attribute `held_clouds`.
 
 from __future__ import annotations
 
+import inspect
 import time
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -57,7 +67,7 @@ class CollectionError(Lano3dpError, RuntimeError):
 class CollectConfig:
     """What `collect` records. Sizes in pixels/points; crop box in metres, world frame."""
 
-    task: str
+    task: str | None  # None only with an env that names its own (env.task.name) or a factory (its name)
     episodes: int
     out: Path
     variation: str = "clean"
@@ -72,6 +82,13 @@ class CollectConfig:
     max_steps: int | None = None  # episode limit (default: the task's); an expert that needs more fails
     dart_noise: float = 0.0  # m, spread of the injected position offset (0: the expert as it is)
     progress: bool = True
+    # A user's env (see collect_from_env); all None: the built-in simulator and the task's open-loop plan.
+    env: Any = None  # 'module:factory', 'path/to/file.py:factory', a factory, or an env object
+    expert: Any = None  # 'module:callable' or expert(env, obs, info) -> (10,); None: env.expert_plan()
+    slots: Sequence[str] | Mapping[str, str] | None = None  # policy slots (None: env.task.object_slots)
+    skill: str | None = None  # default: env.task.skill, else the task name
+    control_hz: float | None = None  # default: env.control_hz (the built-in simulator: CONTROL_HZ)
+    table_height: float = 0.0  # m, world z of the table top; the scene cloud keeps what is above it
 
     def __post_init__(self):
         # Checked before anything is written: a bad value must not leave a store that blocks the corrected run.
@@ -82,6 +99,11 @@ class CollectConfig:
             raise ValueError(f"CollectConfig: dart_noise is metres in [0, 0.1], got {self.dart_noise}")
         if self.max_steps is not None and self.max_steps < 1:
             raise ValueError(f"CollectConfig: max_steps must be >= 1, got {self.max_steps}")
+        if self.dart_noise > 0 and self.expert is not None:
+            raise ValueError("CollectConfig: dart_noise needs the open-loop plan of the built-in simulator (its "
+                             "fade-outs are planned ahead); a closed-loop expert can add its own noise")
+        if self.control_hz is not None and self.control_hz <= 0:
+            raise ValueError(f"CollectConfig: control_hz must be > 0, got {self.control_hz}")
 
 
 @dataclass
@@ -100,6 +122,89 @@ def collect(task: str, episodes: int, out: str | Path, variation: str = "clean",
     config = CollectConfig(task=task, episodes=episodes, out=Path(out), variation=variation, seed=seed,
                            image_size=image_size, n_points=n_points, progress=progress, **options)
     return collect_episodes(config)
+
+
+def collect_from_env(env, expert: str | Callable | None, episodes: int, out: str | Path, *,
+                     slots: Sequence[str] | Mapping[str, str] | None = None, task: str | None = None,
+                     control_hz: float | None = None, max_steps: int | None = None, seed: int = 0,
+                     crop_low: Sequence[float] | None = None, crop_high: Sequence[float] | None = None,
+                     table_height: float = 0.0, n_points: int = 64, image_size: int = 128, progress: bool = True,
+                     **options) -> CollectResult:
+    """Record successful expert episodes from any environment into `out` until it holds `episodes` (resumable).
+
+    Args:
+        env: 'module:factory', 'path/to/file.py:factory', a factory callable (called as `lano3dp eval` calls it:
+            task, seed, variation, image_size, render_rgb, max_steps, those it names), or an env object; None:
+            the built-in simulator of `task`.
+        expert: `expert(env, obs, info) -> (10,)` absolute action (position m, rotation 6D, gripper 0 open ..
+            1 closed), called every step, closed loop; an object with `reset(env, obs, info)` has it called
+            after each env reset. A 'module:callable' name is imported. None: the env's open-loop
+            `expert_plan()` (the built-in simulator's).
+        slots: the policy's object slots in order, e.g. ("block", "drawer"), or {slot: phrase}; each episode's
+            phrase of a slot is info["target_phrases"][slot], else the phrase given, else the slot itself.
+            Default: env.task.object_slots.
+        task: the task name the dataset and the policy trained on it carry (default: env.task.name, else
+            the env factory's name).
+        control_hz: the env's control rate (default: env.control_hz); stored for training and evaluation.
+        max_steps: step limit of an expert episode (default: env.max_steps).
+        seed: episode i resets with seed + i (a failed seed is replaced by seed + i + k * SEED_STRIDE).
+        crop_low, crop_high: (3,) world-frame box (m) clouds are cropped to; None: no crop.
+        table_height: world z (m) of the table top; the scene cloud keeps what is above it.
+        options: other `CollectConfig` fields (scene_points, rgb_size, min_points, variation, skill).
+
+    Returns:
+        CollectResult: episodes added and held, seeds that failed, seconds, steps.
+
+    Raises:
+        CollectionError: the expert failed on MAX_TRIES seeds for one episode, or the store at `out` was
+            collected with other settings.
+    """
+    config = CollectConfig(task=task, episodes=episodes, out=Path(out), seed=seed, image_size=image_size,
+                           n_points=n_points, progress=progress, max_steps=max_steps,
+                           crop_low=None if crop_low is None else tuple(crop_low),
+                           crop_high=None if crop_high is None else tuple(crop_high), env=env,
+                           expert=expert, slots=slots, control_hz=control_hz, table_height=table_height,
+                           **options)
+    return collect_episodes(config)
+
+
+class OpenLoopPlan:
+    """The built-in simulator's scripted plan as an expert: `env.expert_plan()` at reset, one action a step."""
+
+    def __init__(self):
+        self.actions: np.ndarray | None = None
+        self.step = 0
+
+    def reset(self, env, obs, info) -> None:
+        plan = getattr(env, "expert_plan", None)
+        if not callable(plan):
+            raise CollectionError("no expert given and the env has no expert_plan(); pass a closed-loop "
+                                  "expert(env, obs, info) -> action (10,)")
+        self.actions, self.step = np.asarray(plan().actions()), 0
+
+    def __call__(self, env, obs, info) -> np.ndarray:
+        action = self.actions[min(self.step, len(self.actions) - 1)]
+        self.step += 1
+        return action
+
+
+def load_expert(spec: str | Callable | None) -> Callable:
+    """'module:callable' or 'path/to/file.py:callable' (imported as --env factories are), a callable, or None
+    (the env's open-loop plan) -> the expert."""
+    from lano3dp.env_factory import EnvFactoryError, load_factory
+
+    if spec is None:
+        return OpenLoopPlan()
+    if not isinstance(spec, str):
+        if not callable(spec):
+            raise CollectionError(f"the expert must be callable as expert(env, obs, info), got {type(spec).__name__}")
+        return spec
+    try:
+        expert = load_factory(spec)
+    except EnvFactoryError as error:
+        raise CollectionError(str(error).replace("--env", "--expert", 1).replace("callable factory", "callable "
+                                                                                  "expert")) from None
+    return expert() if inspect.isclass(expert) else expert  # a class: one instance, reset each episode
 
 
 def collect_episodes(config: CollectConfig) -> CollectResult:
@@ -123,84 +228,170 @@ def _collect_episodes(config: CollectConfig) -> CollectResult:
     from tqdm.auto import tqdm
 
     from lano3dp.perception import ObjectObserver, SimOracleSegmenter
-    from lano3dp.sim import TabletopEnv, Variation
 
     started = time.perf_counter()
-    variation = Variation.parse(config.variation)
-    env = TabletopEnv(config.task, variation=variation, image_size=config.image_size, render_rgb=True,
-                      control_hz=CONTROL_HZ, max_steps=config.max_steps)
-    task = env.task
-    attrs = {
-        "skill": task.skill,
-        "task": task.name,
-        "object_names": list(task.object_slots),
-        "control_hz": CONTROL_HZ,
-        "crop_low": list(config.crop_low),
-        "crop_high": list(config.crop_high),
-        "n_points": config.n_points,
-        "scene_points": config.scene_points,
-        "variation": variation.name,
-        "image_size": config.image_size,
-        "base_seed": config.seed,
-        "seed_stride": SEED_STRIDE,
-        "source": "scripted expert, successful episodes only",
-        "dart_noise": config.dart_noise,
-    }
-    store = EpisodeStore.open_or_create(config.out, attrs)
-    existing = store.attrs
-    for key in ("task", "variation", "n_points", "base_seed", "dart_noise"):
-        if key in existing and existing[key] != attrs[key]:
-            raise CollectionError(f"{config.out} was collected with {key}={existing[key]!r}, not {attrs[key]!r}; "
-                                  "use another --out or the same settings to resume")
-    observer = ObjectObserver(SimOracleSegmenter(), n_points=config.n_points, crop_low=config.crop_low,
-                              crop_high=config.crop_high, min_points=config.min_points, seed=0)
-    result = CollectResult(config.out, 0, store.n_episodes)
-    seeds = list(existing.get("episode_seeds", []))
-    held_total = int(existing.get("held_clouds", 0))
-    bar = tqdm(total=config.episodes, initial=store.n_episodes, desc=f"collect {task.name}",
-               disable=not config.progress, unit="ep")
+    env, label, owned = _make_env(config)
     try:
-        for index in range(store.n_episodes, config.episodes):
-            for attempt in range(MAX_TRIES):
-                episode_seed = config.seed + index + attempt * SEED_STRIDE
-                episode, held = record_episode(env, observer, episode_seed, config)
-                if episode is not None:
-                    break
-                result.failed_seeds.append(episode_seed)
-            else:
-                raise CollectionError(f"the {task.name} expert failed on {MAX_TRIES} seeds for episode {index} "
-                                      f"(seeds {result.failed_seeds[-MAX_TRIES:]})")
-            store.append_episode(episode)
-            seeds.append(episode_seed)
-            held_total += held
-            result.added += 1
-            result.steps += len(episode["action"])
-            store.update_attrs(episode_seeds=seeds, held_clouds=held_total,
-                               failed_seeds=list(existing.get("failed_seeds", [])) + result.failed_seeds,
-                               camera=env.camera.to_dict())
-            bar.update(1)
+        source = _Source.of(env, label, config)
+        expert = load_expert(config.expert)
+        attrs = {
+            "skill": source.skill,
+            "task": source.task,
+            "object_names": list(source.slots),
+            "control_hz": source.control_hz,
+            "crop_low": None if config.crop_low is None else list(config.crop_low),
+            "crop_high": None if config.crop_high is None else list(config.crop_high),
+            "n_points": config.n_points,
+            "scene_points": config.scene_points,
+            "variation": source.variation,
+            "image_size": config.image_size,
+            "base_seed": config.seed,
+            "seed_stride": SEED_STRIDE,
+            "source": "scripted expert, successful episodes only",
+            "dart_noise": config.dart_noise,
+        }
+        if source.env_name is not None:  # a user's env: what made the data, and where its table is
+            attrs |= {"env": source.env_name, "expert": _name(config.expert), "table_height": config.table_height}
+        store = EpisodeStore.open_or_create(config.out, attrs)
+        existing = store.attrs
+        for key in ("task", "variation", "n_points", "base_seed", "dart_noise", "env", "table_height"):
+            if key in existing and existing.get(key) != attrs.get(key):
+                raise CollectionError(f"{config.out} was collected with {key}={existing[key]!r}, not "
+                                      f"{attrs.get(key)!r}; use another --out or the same settings to resume")
+        observer = ObjectObserver(SimOracleSegmenter(), n_points=config.n_points, crop_low=config.crop_low,
+                                  crop_high=config.crop_high, min_points=config.min_points, seed=0)
+        result = CollectResult(config.out, 0, store.n_episodes)
+        seeds = list(existing.get("episode_seeds", []))
+        held_total = int(existing.get("held_clouds", 0))
+        bar = tqdm(total=config.episodes, initial=store.n_episodes, desc=f"collect {source.task}",
+                   disable=not config.progress, unit="ep")
+        try:
+            for index in range(store.n_episodes, config.episodes):
+                for attempt in range(MAX_TRIES):
+                    episode_seed = config.seed + index + attempt * SEED_STRIDE
+                    episode, held, camera = record_episode(env, observer, episode_seed, config, expert, source)
+                    if episode is not None:
+                        break
+                    result.failed_seeds.append(episode_seed)
+                else:
+                    raise CollectionError(f"the {source.task} expert failed on {MAX_TRIES} seeds for episode "
+                                          f"{index} (seeds {result.failed_seeds[-MAX_TRIES:]})")
+                store.append_episode(episode)
+                seeds.append(episode_seed)
+                held_total += held
+                result.added += 1
+                result.steps += len(episode["action"])
+                store.update_attrs(episode_seeds=seeds, held_clouds=held_total,
+                                   failed_seeds=list(existing.get("failed_seeds", [])) + result.failed_seeds,
+                                   camera=camera)
+                bar.update(1)
+        finally:
+            bar.close()
     finally:
-        bar.close()
-        env.close()
+        if owned:
+            env.close()
     result.total = store.n_episodes
     result.seconds = time.perf_counter() - started
     return result
 
 
-def record_episode(env, observer, seed: int, config: CollectConfig) -> tuple[dict[str, np.ndarray] | None, int]:
-    """Run the expert on `seed`; the episode's arrays if it succeeded, else None. Also the held-cloud count."""
-    from lano3dp.perception import PerceptionError, scene_cloud
+@dataclass(frozen=True)
+class _Source:
+    """What the store says about the env the episodes come from."""
 
+    task: str
+    skill: str
+    slots: tuple[str, ...]
+    phrases: dict[str, str]  # default phrase per slot (info["target_phrases"] overrides it)
+    control_hz: float
+    max_steps: int
+    variation: str
+    env_name: str | None  # None: the built-in simulator
+
+    @classmethod
+    def of(cls, env, label: str, config: CollectConfig) -> _Source:
+        inner = getattr(env, "env", env)
+        task = getattr(inner, "task", None)
+        builtin = config.env is None
+        if config.slots is not None:
+            phrases = dict(config.slots) if isinstance(config.slots, Mapping) else {s: s for s in config.slots}
+        elif task is not None and hasattr(task, "object_slots"):
+            phrases = {slot: slot for slot in task.object_slots}
+        else:
+            raise CollectionError(f"{label}: give the policy's object slots (slots=('block', ...) or --slots "
+                                  "block,...); the env has no task.object_slots")
+        if not phrases:
+            raise CollectionError("slots: give at least one object slot")
+        control_hz = config.control_hz or getattr(inner, "control_hz", None)
+        if not control_hz:
+            raise CollectionError(f"{label}: give control_hz (--control-hz) or set env.control_hz; training and "
+                                  "evaluation need the rate the actions were recorded at")
+        max_steps = config.max_steps or getattr(inner, "max_steps", None)
+        if not max_steps:
+            raise CollectionError(f"{label}: give max_steps (--max-steps) or set env.max_steps, the step limit of "
+                                  "an expert episode")
+        name = config.task or getattr(task, "name", None) or (None if builtin else _name(config.env).split(":")[-1])
+        variation = config.variation
+        if builtin:
+            from lano3dp.sim import Variation
+
+            variation = Variation.parse(config.variation).name
+        return cls(task=str(name), skill=str(config.skill or getattr(task, "skill", None) or name),
+                   slots=tuple(phrases), phrases={k: str(v) for k, v in phrases.items()},
+                   control_hz=float(control_hz), max_steps=int(max_steps), variation=variation,
+                   env_name=None if builtin else _name(config.env))
+
+
+def _make_env(config: CollectConfig):
+    """(env, label for errors, whether collection closes it): the built-in simulator, a factory's, or the given."""
+    from lano3dp.env_factory import CheckedEnv, make_env
+
+    spec = config.env
+    if spec is not None and not isinstance(spec, str) and not inspect.isclass(spec) and \
+            callable(getattr(spec, "reset", None)) and callable(getattr(spec, "step", None)):
+        return CheckedEnv(spec, f"the env {type(spec).__name__}"), type(spec).__name__, False
+    if spec is None and config.task is None:
+        raise CollectionError("give a task of the built-in simulator or an env")
+    options = {"task": config.task, "seed": config.seed, "variation": config.variation,
+               "image_size": config.image_size, "render_rgb": True, "max_steps": config.max_steps}
+    env = make_env(spec, **options)
+    return env, env.label, True
+
+
+def _name(value) -> str | None:
+    """How the store names an env or expert: its spec, its 'module:qualname', or its type."""
+    if value is None or isinstance(value, str):
+        return value
+    from lano3dp.env_factory import EnvFactoryError, factory_name
+
+    try:
+        return factory_name(value)
+    except EnvFactoryError:
+        return getattr(value, "__qualname__", type(value).__qualname__)
+
+
+def record_episode(env, observer, seed: int, config: CollectConfig, expert: Callable | None = None,
+                   source: _Source | None = None) -> tuple[dict[str, np.ndarray] | None, int, dict | None]:
+    """Run the expert on `seed`; the episode's arrays if it succeeded, else None. Also the held-cloud count
+    and the camera of the last frame (`PinholeCamera.to_dict()`)."""
+    from lano3dp.perception import PerceptionError, scene_cloud
+    from lano3dp.runtime import observe
+
+    expert = OpenLoopPlan() if expert is None else expert
+    source = _Source.of(env, "the env", config) if source is None else source
     obs, info = env.reset(seed=seed)
-    phrases = [info["target_phrases"][slot] for slot in env.task.object_slots]
-    actions = env.expert_plan().actions()
+    if callable(getattr(expert, "reset", None)):
+        expert.reset(env, obs, info)
+    named = info.get("target_phrases") or {}
+    phrases = [named.get(slot, source.phrases[slot]) for slot in source.slots]
     rows: dict[str, list[np.ndarray]] = {k: [] for k in ("action", "state", "object_clouds", "scene_cloud", "rgb")}
     last_clouds: list[np.ndarray | None] = [None] * len(phrases)
     held = 0
     success = False
-    noise = DartNoise(config.dart_noise, seed, actions)
-    for t in range(env.max_steps):
-        frame = env.frame()
+    noise = DartNoise(config.dart_noise, seed, getattr(expert, "actions", None), source.control_hz)
+    frame = None
+    for t in range(source.max_steps):
+        frame, state = observe(env, obs)
         try:
             clouds = list(observer.observe(frame, phrases).points)
         except PerceptionError:  # some slot is occluded: hold its last cloud
@@ -210,29 +401,34 @@ def record_episode(env, observer, seed: int, config: CollectConfig) -> tuple[dic
                     clouds.append(observer.observe(frame, [phrase]).points[0])
                 except PerceptionError:
                     if last_clouds[k] is None:
-                        return None, 0
+                        return None, 0, None
                     clouds.append(last_clouds[k])
                     held += 1
         last_clouds = clouds
-        action = actions[min(t, len(actions) - 1)]
+        action = np.asarray(expert(env, obs, info), dtype=np.float32)
+        if action.shape != (10,):
+            raise CollectionError(f"the expert returned an action of shape {action.shape}; it must be (10,): "
+                                  "position (m), rotation 6D, gripper (0 open .. 1 closed), absolute")
         rows["action"].append(action)
-        rows["state"].append(obs["state"])
+        rows["state"].append(state)
         rows["object_clouds"].append(np.stack(clouds))
         rows["scene_cloud"].append(scene_cloud(frame, config.scene_points, config.crop_low, config.crop_high,
-                                               table_height=0.0))
-        rows["rgb"].append(resize_rgb(obs["rgb"], config.rgb_size))
+                                               table_height=config.table_height))
+        rows["rgb"].append(resize_rgb(frame.rgb, config.rgb_size))
         obs, _, terminated, truncated, info = env.step(noise.perturb(action, t))
-        if terminated:
+        if info.get("success"):
             success = True
             break
-        if truncated:
+        if terminated or truncated:
             break
     if not success:
-        return None, 0
+        return None, 0, None
     episode = {key: np.stack(values) for key, values in rows.items()}
     for key in ("action", "state", "object_clouds", "scene_cloud"):
         episode[key] = episode[key].astype(np.float32)
-    return episode, held
+    camera = getattr(getattr(env, "env", env), "camera", None)
+    camera = camera if hasattr(camera, "to_dict") else frame.camera
+    return episode, held, camera.to_dict()
 
 
 class DartNoise:
@@ -242,12 +438,15 @@ class DartNoise:
     FADE_HEIGHT = (0.06, 0.12)  # m above the table: no offset below the first height, all of it above the second
     QUIET_STEPS, FADE_STEPS = 4, 6  # no offset this close to a gripper change, all of it QUIET + FADE away
 
-    def __init__(self, spread: float, seed: int, actions: np.ndarray):
+    def __init__(self, spread: float, seed: int, actions: np.ndarray | None, control_hz: float = CONTROL_HZ):
         self.spread = float(spread)
         self.rng = np.random.default_rng([int(seed), 0xDA27])
-        self.keep = float(np.exp(-1.0 / (CONTROL_HZ * self.CORRELATION_S)))
+        self.keep = float(np.exp(-1.0 / (control_hz * self.CORRELATION_S)))
         self.offset = np.zeros(3)
         self.scale = np.array([1.0, 1.0, 0.5]) * self.spread
+        if actions is None:  # a closed-loop expert: no plan to fade by (spread 0, see CollectConfig)
+            self.weights = np.zeros(1)
+            return
         actions = np.asarray(actions, dtype=np.float64)
         low, high = self.FADE_HEIGHT
         height = np.clip((actions[:, 2] - low) / (high - low), 0.0, 1.0)

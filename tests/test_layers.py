@@ -1,7 +1,7 @@
 """Layering as a test: a lower layer never imports an upper one, counting function-local imports too.
 
 Layers, lowest first (README "Design", docs/architecture.md): geometry < data, perception, language, guidance,
-policy < sim < runtime, train, evaluate, env_factory, pipeline, executor, augment, locking, report < cli. Modules of
+policy, mujoco_frame, wrappers < sim < runtime, train, evaluate, env_factory, pipeline, executor, augment, locking, report < cli. Modules of
 one layer may import one another (policy uses guidance's sampler). `lano3dp.errors` is the shared base, importable anywhere.
 """
 
@@ -13,7 +13,7 @@ from pathlib import Path
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "lano3dp"
 LAYERS = (
     ("errors", "geometry"),
-    ("data", "perception", "language", "guidance", "policy"),
+    ("data", "perception", "language", "guidance", "policy", "mujoco_frame", "wrappers"),
     ("sim",),
     ("runtime", "train", "evaluate", "env_factory", "pipeline", "executor", "augment", "locking", "report"),
     ("cli",),
@@ -25,6 +25,10 @@ RANK = {part: rank for rank, parts in enumerate(LAYERS) for part in parts}
 KNOWN_EXCEPTIONS = {
     ("lano3dp.data.collect", "sim"): "collection builds TabletopEnv and runs its expert from a task name "
                                      "(issue #12 item 3: take an env and an expert instead)",
+    ("lano3dp.data.collect", "runtime"): "collection from a user's env reads its observations with runtime.observe, "
+                                         "as evaluation does; observe belongs a layer down, with the frame type",
+    ("lano3dp.data.collect", "env_factory"): "collection makes a user's env from --env through the same factory as "
+                                             "eval; collect is an orchestration stage filed under data",
     ("lano3dp.data.collect", "locking"): "collection locks its output store with locking.WriteLock, a small "
                                          "utility filed with orchestration; it moves down with collect's split",
 }

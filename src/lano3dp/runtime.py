@@ -12,11 +12,12 @@ protocol (`lano3dp.sim.protocol`): `reset(seed, options) -> (obs, info)` and
     rollout          runs one episode with a runner and measures it (success, obstacle contacts, minimum
                      clearance, EE path length, latency per chunk).
 
-Obstacles become costs the paper's way: segment the obstacle, fit a vertical cylinder to its points
-(`guidance.fitting.fit_cylinder`) and hinge the xy distance of every waypoint at
-Q* = obstacle radius + held-object extent + margin (`guidance.costs.Cylinder.safety_distance`).
-The held object's extent is measured from its own cloud (the paper used the bowl's diameter,
-because the gripper holds the bowl by its rim).
+Obstacles become costs as in the paper: segment the obstacle and fit a vertical cylinder to its points
+(`guidance.fitting.fit_cylinder`). What must keep clear of it is, by default, the swept body
+(`ObstacleModel.body="swept"`, `guidance.costs.SweptBody`): the hand as a row of balls along its finger
+axis plus the held object as a ball at its fitted centre, re-measured before each chunk. The paper's
+model (`body="sphere"`) hinges the xy distance of every waypoint at Q* = obstacle radius + held-object
+extent + margin, the extent measured from the held object's cloud (the paper used the bowl's diameter).
 
 This module imports torch and the policy/guidance layers but never the simulator: the env is
 duck-typed, so a user's own robot plugs in the same way.

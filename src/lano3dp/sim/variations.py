@@ -272,7 +272,8 @@ def sample_obstacles(task, layout, rng: np.random.Generator, count: int,
 
     kind: "cylinder" (the paper's), "box" (an upright box, yaw free) or "cluster" (a second cylinder 0.5-1.5 cm
     beside the first). speed > 0: each obstacle swings across the path by MOVING_AMPLITUDE at that peak speed,
-    and its whole swing keeps the clearances above. The default draws exactly the random numbers it always did.
+    and its whole swing keeps the clearances above. The plain cylinder makes the same random draws as before
+    the other kinds existed (so a seed's layout and candidates are unchanged; the keep-outs decide which is taken).
     """
     attempts = [(task.obstacle_region(layout), 0.02, 200), (task.nominal_path(layout), 0.05, 300)]
     keep_out = GRIPPER_FOOTPRINT_RADIUS + START_CLEARANCE - 0.015  # 1.5 cm added below

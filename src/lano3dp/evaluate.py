@@ -283,9 +283,7 @@ class EpisodeRunner:
         self.policy = DiffusionPolicy.from_pretrained(config.checkpoint)
         settings = dataset_settings(config.checkpoint)
         self.settings = settings
-        task = config.task or settings.task or self.policy.config.extra.get("task")
-        if task is None:
-            raise ValueError("no task given and the checkpoint does not say which task it was trained on; pass --task")
+        task = evaluation_task(config, settings, self.policy.config)
         check_env_task(task, self.policy.config, config.env)
         self.task = task
         image_size = config.image_size or settings.image_size or 128
@@ -555,6 +553,14 @@ def evaluate(config: EvalConfig, progress: Callable[[int, int, dict], None] | No
             lock.release()
 
 
+def evaluation_task(config: EvalConfig, settings: DatasetSettings, policy_config) -> str:
+    """The task evaluated: the config's, else the one the checkpoint was trained on."""
+    task = config.task or settings.task or policy_config.extra.get("task")
+    if task is None:
+        raise ValueError("no task given and the checkpoint does not say which task it was trained on; pass --task")
+    return task
+
+
 def evaluation_seeds(config: EvalConfig, checkpoint: Path) -> list[int]:
     """The episode seeds: seed, seed + 1, ...; or, with obstacle_scenes_only, the first seeds from seed on
     whose scene has room for the variation's obstacles."""
@@ -563,9 +569,7 @@ def evaluation_seeds(config: EvalConfig, checkpoint: Path) -> list[int]:
     from lano3dp.policy.modeling import load_config
     from lano3dp.sim.env import obstacle_scene_seeds
 
-    task = config.task or dataset_settings(checkpoint).task or load_config(checkpoint / "config.json").extra.get("task")
-    if task is None:
-        raise ValueError("no task given and the checkpoint does not say which task it was trained on; pass --task")
+    task = evaluation_task(config, dataset_settings(checkpoint), load_config(checkpoint / "config.json"))
     return obstacle_scene_seeds(task, config.variation, config.seed, config.episodes)
 
 

@@ -143,6 +143,17 @@ def _quiet(_: str) -> None:
     pass
 
 
+def _plan(cells: Sequence[Cell], kinds: Mapping[str, CellKind] | None,
+          log: Log) -> tuple[Mapping[str, CellKind], list[Cell], list[str]]:
+    """(kinds, the cells to run in dependency order, the names of those already done): every executor's start."""
+    kinds = BUILTIN_KINDS if kinds is None else kinds
+    order = ordered(cells, kinds)
+    skipped = [cell.name for cell in order if kinds[cell.kind].done(cell)]
+    todo = [cell for cell in order if cell.name not in skipped]
+    log(f"graph: {len(todo)} cells to run, {len(skipped)} done already")
+    return kinds, todo, skipped
+
+
 def _execute(cell: Cell, kind: CellKind, env: Mapping[str, str] | None = None) -> str:
     """Run one cell (in whatever process the executor chose); returns its name or raises CellFailedError."""
     for key, value in (env or {}).items():
@@ -174,11 +185,7 @@ class LocalExecutor:
 
     def run(self, cells: Sequence[Cell], kinds: Mapping[str, CellKind] | None = None, *,
             log: Log = _quiet) -> GraphRun:
-        kinds = BUILTIN_KINDS if kinds is None else kinds
-        order = ordered(cells, kinds)
-        skipped = [cell.name for cell in order if kinds[cell.kind].done(cell)]
-        todo = [cell for cell in order if cell.name not in skipped]
-        log(f"graph: {len(todo)} cells to run, {len(skipped)} done already")
+        kinds, todo, skipped = _plan(cells, kinds, log)
         if self.workers == 1:
             executed = []
             for cell in todo:
@@ -294,11 +301,7 @@ class RayExecutor:
 
     def run(self, cells: Sequence[Cell], kinds: Mapping[str, CellKind] | None = None, *,
             log: Log = _quiet) -> GraphRun:
-        kinds = BUILTIN_KINDS if kinds is None else kinds
-        order = ordered(cells, kinds)
-        skipped = [cell.name for cell in order if kinds[cell.kind].done(cell)]
-        todo = [cell for cell in order if cell.name not in skipped]
-        log(f"graph: {len(todo)} cells to run, {len(skipped)} done already")
+        kinds, todo, skipped = _plan(cells, kinds, log)
         if not todo:
             return GraphRun((), tuple(skipped))
         ray = import_ray(local=self.address is None)

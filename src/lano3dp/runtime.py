@@ -389,18 +389,15 @@ class PolicyRunner:
         except PerceptionError:
             if self._last_clouds is None:
                 clouds = self._first_clouds(frame)
-                self._last_clouds = clouds
-                self.initial_targets = {phrase: clouds[k].mean(0).round(4).tolist()
-                                        for k, phrase in enumerate(self.target_phrases)}
-                return clouds
-            clouds = []
-            for slot, phrase in enumerate(self.target_phrases):
-                try:
-                    clouds.append(self.observer.observe(frame, [phrase]).points[0])
-                except PerceptionError:
-                    clouds.append(self._last_clouds[slot])
-                    self.held_clouds += 1
-            clouds = np.stack(clouds)
+            else:
+                clouds = []
+                for slot, phrase in enumerate(self.target_phrases):
+                    try:
+                        clouds.append(self.observer.observe(frame, [phrase]).points[0])
+                    except PerceptionError:
+                        clouds.append(self._last_clouds[slot])
+                        self.held_clouds += 1
+                clouds = np.stack(clouds)
         if self._last_clouds is None:
             self.initial_targets = {phrase: clouds[k].mean(0).round(4).tolist()
                                     for k, phrase in enumerate(self.target_phrases)}

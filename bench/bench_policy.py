@@ -98,7 +98,7 @@ def time_training(policy: DiffusionPolicy, dataset: SequenceDataset, batch: int,
         marks.append(time.process_time())
         visual_out, state_out = visual.detach().requires_grad_(), state.detach().requires_grad_()
         cond = torch.cat([visual_out, state_out], dim=-1).reshape(batch, -1)
-        trajectory = policy.normalizer.normalize("action", data["action"].float())
+        trajectory = policy.normalize_actions(data["action"].float(), data["obs"]["state"])
         noise = torch.randn(trajectory.shape, generator=generator)
         timesteps = torch.randint(0, config.num_train_timesteps, (batch,), generator=generator)
         loss = F.mse_loss(policy.unet(policy.noise_scheduler.add_noise(trajectory, noise, timesteps), timesteps,

@@ -337,3 +337,63 @@ def test_checkpoint_from_a_newer_format_is_refused_and_unversioned_ones_load(tmp
 def test_missing_checkpoint_is_file_not_found(tmp_path):
     with pytest.raises(FileNotFoundError, match="no policy checkpoint"):
         DiffusionPolicy.from_pretrained(tmp_path)
+
+
+# ---- relative action frame -------------------------------------------------------------
+def test_relative_actions_are_world_frame_outside_the_policy_and_follow_the_hand():
+    """The UNet's offsets are anchored at the last observed EE position: moving the hand moves the whole chunk
+    by the same amount (same noise, same clouds), and the guidance cost still sees world positions."""
+    policy = make_policy(action_frame="relative")
+    obs = random_obs(policy.config)
+    noise = torch.randn(2, 16, 10, generator=torch.Generator().manual_seed(0))
+    moved = {key: value.copy() for key, value in obs.items()}
+    shift = np.array([0.05, -0.03, 0.02], np.float32)
+    moved["state"][:, -1, :3] += shift  # "now" anchors the chunk
+    for module in policy.obs_encoder.state.modules():  # blind the state encoder: the anchor alone moves
+        if isinstance(module, torch.nn.Linear):
+            module.weight.data.zero_()
+    before = policy.predict_action_chunk(obs, scheduler="ddim", initial_noise=noise).trajectory
+    after = policy.predict_action_chunk(moved, scheduler="ddim", initial_noise=noise).trajectory
+    assert torch.allclose(after[..., :3] - before[..., :3], torch.as_tensor(shift).expand(2, 16, 3), atol=1e-5)
+    assert torch.allclose(after[..., 3:], before[..., 3:], atol=1e-5)
+    seen = []
+    policy.predict_action_chunk(moved, scheduler="ddim", initial_noise=noise, guidance=GuidanceConfig(scale=1e-9),
+                                position_cost=lambda positions: seen.append(positions.detach()) or positions.sum((1, 2)))
+    assert torch.allclose(seen[-1], after[..., :3], atol=1e-4)
+
+
+def test_relative_normaliser_is_fitted_on_the_offsets_of_training_windows():
+    from lano3dp.policy.modeling import relative_action_rows
+
+    states = np.zeros((5, 11)); states[:, 0] = np.arange(5.0)  # the hand moves 1 m per step along x
+    actions = np.zeros((5, 10)); actions[:, 0] = np.arange(5.0) + 1.0  # each action one step ahead
+    rows = relative_action_rows([actions], [states], n_obs_steps=2, horizon=4)
+    # window of "now" t holds actions t-1 .. t+2 (edge-padded): offsets 0, 1, 2, 3 away from the edges
+    assert rows.shape == (5 * 4, 10)
+    assert rows[:4, 0].tolist() == [1.0, 1.0, 2.0, 3.0]  # t = 0: actions 0, 0, 1, 2 minus x = 0
+    assert rows[-4:, 0].tolist() == [0.0, 1.0, 1.0, 1.0]  # t = 4: actions 3, 4, 4, 4 minus x = 4
+
+
+def test_a_relative_checkpoint_round_trips_and_carries_format_version_two(tmp_path):
+    from safetensors import safe_open
+
+    policy = make_policy(seed=1, action_frame="relative")
+    obs = random_obs(policy.config)
+    before = policy.predict_action_chunk(obs, generator=torch.Generator().manual_seed(2)).trajectory
+    policy.save_pretrained(tmp_path / "ckpt")
+    with safe_open(str(tmp_path / "ckpt" / "model.safetensors"), framework="pt") as handle:
+        assert handle.metadata()["format_version"] == "2"
+    make_policy().save_pretrained(tmp_path / "absolute")  # absolute stays readable by older releases
+    with safe_open(str(tmp_path / "absolute" / "model.safetensors"), framework="pt") as handle:
+        assert handle.metadata()["format_version"] == "1"
+    loaded = DiffusionPolicy.from_pretrained(tmp_path / "ckpt")
+    assert loaded.config.action_frame == "relative"
+    assert torch.equal(loaded.predict_action_chunk(obs, generator=torch.Generator().manual_seed(2)).trajectory, before)
+
+
+def test_a_config_written_before_action_frame_existed_reads_as_absolute():
+    data = tiny_config().to_dict()
+    del data["action_frame"]
+    assert PolicyConfig.from_dict(data).action_frame == "absolute"
+    with pytest.raises(ValueError, match="action_frame must be one of"):
+        tiny_config(action_frame="delta")

@@ -107,7 +107,7 @@ def _policy_sampler(checkpoint, data, episode, step, scheduler, steps, samples):
     obs = _obs_window(store, episode, step, policy.config.obs_keys, policy.config.n_obs_steps, samples)
 
     def to_metric(trajectory):
-        return policy.normalizer.unnormalize("action", trajectory)[..., :3]
+        return policy.unnormalize_actions(trajectory, obs["state"])[..., :3]
 
     def sample_chunk(guidance, cost, generator, on_step):
         chunk = policy.predict_action_chunk(obs, guidance=guidance, position_cost=cost, scheduler=scheduler,

@@ -113,7 +113,10 @@ class SequenceDataset:
     def all_obs(self, key: str) -> np.ndarray:
         return self._rows(key)
 
-    def _rows(self, key: str) -> np.ndarray:
+    def episode_arrays(self, key: str) -> list[np.ndarray]:
+        """The selected episodes' rows of `key`, one array per episode."""
         ends = self.store.episode_ends
-        parts = [self.data[key][(0 if e == 0 else ends[e - 1]):ends[e]] for e in self.episodes]
-        return np.concatenate(parts, axis=0)
+        return [self.data[key][(0 if e == 0 else ends[e - 1]):ends[e]] for e in self.episodes]
+
+    def _rows(self, key: str) -> np.ndarray:
+        return np.concatenate(self.episode_arrays(key), axis=0)

@@ -18,6 +18,7 @@ from typing import Any
 OBS_TYPES = ("objects", "scene", "image")
 POINT_ENCODERS = ("residual", "mlp")
 INFERENCE_SCHEDULERS = ("ddpm", "ddim")
+ACTION_FRAMES = ("absolute", "relative")
 
 # UNet widths by name. "compact" is the CPU default (2.9 M parameters with the default encoder; its fp16
 # weights fit the 6 MB a packaged checkpoint may take), "small" the earlier default (5.9 M), "dp" Chi et
@@ -58,6 +59,9 @@ class PolicyConfig:
         num_train_timesteps, beta_schedule, prediction_type, clip_sample: the diffusion process.
         inference_scheduler: "ddpm" or "ddim", used when predict_action_chunk is not told otherwise.
         num_inference_steps: denoising steps at inference (None: num_train_timesteps).
+        action_frame: what the UNet predicts for the action positions: "absolute" (world frame) or "relative"
+            (offsets from the EE position at the last observation; rotation and gripper stay absolute). The
+            policy converts both ways itself, so its inputs and outputs are world-frame in either case.
     """
 
     obs_type: str = "objects"
@@ -84,6 +88,7 @@ class PolicyConfig:
     clip_sample: bool = True
     inference_scheduler: str = "ddim"
     num_inference_steps: int | None = 10
+    action_frame: str = "absolute"
     extra: dict[str, Any] = field(default_factory=dict)  # free-form notes (dataset, skill), not used by the model
 
     def __post_init__(self):
@@ -102,6 +107,8 @@ class PolicyConfig:
              f"point_encoder must be one of {POINT_ENCODERS}, got {self.point_encoder!r}")
         need(self.inference_scheduler in INFERENCE_SCHEDULERS,
              f"inference_scheduler must be one of {INFERENCE_SCHEDULERS}, got {self.inference_scheduler!r}")
+        need(self.action_frame in ACTION_FRAMES,
+             f"action_frame must be one of {ACTION_FRAMES}, got {self.action_frame!r}")
         if self.obs_type == "objects":
             need(len(self.object_names) >= 1, "obs_type 'objects' needs object_names (the slot order)")
             need(len(set(self.object_names)) == len(self.object_names),
@@ -157,7 +164,8 @@ class PolicyConfig:
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"PolicyConfig: unknown fields {unknown}")
-        return cls(**data)
+        # configs written before action_frame existed predicted world positions, whatever today's default is
+        return cls(**({"action_frame": "absolute"} | data))
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2, sort_keys=True)

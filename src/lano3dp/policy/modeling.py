@@ -31,8 +31,15 @@ CONFIG_NAME = "config.json"
 WEIGHTS_NAME = "model.safetensors"
 NORMALIZER_NAME = "normalizer.json"
 # Bump when a saved checkpoint's meaning changes (keys, normalisation, action layout); loading refuses
-# newer versions instead of producing silently wrong actions. Files without the field are version 1.
-CHECKPOINT_FORMAT_VERSION = 1
+# newer versions instead of producing silently wrong actions. Files without the field are version 1;
+# version 2 adds relative action positions (config.action_frame), so only such checkpoints are written as 2
+# and a release that predates them refuses them rather than reading offsets as world positions.
+CHECKPOINT_FORMAT_VERSION = 2
+
+
+def format_version_for(config: PolicyConfig) -> int:
+    """The oldest checkpoint format that can hold a policy of this config."""
+    return 2 if config.action_frame == "relative" else 1
 
 PositionCost = Callable[[torch.Tensor], torch.Tensor]
 
@@ -95,14 +102,38 @@ class DiffusionPolicy(nn.Module):
         self.normalizer.set_stats(stats)
 
     def fit_normalizer(self, dataset) -> None:
-        """Fit the statistics on every step of a lano3dp.data.SequenceDataset's episodes."""
-        data = {"action": dataset.all_actions(), "state": dataset.all_obs("state")}
+        """Fit the statistics on every step of a lano3dp.data.SequenceDataset's episodes (relative actions: on
+        every offset a training window can hold)."""
+        actions = dataset.all_actions()
+        if self.config.action_frame == "relative":
+            actions = relative_action_rows(dataset.episode_arrays(dataset.action_key), dataset.episode_arrays("state"),
+                                           self.config.n_obs_steps, self.config.horizon)
+        data = {"action": actions, "state": dataset.all_obs("state")}
         if self.config.obs_type != "image":
             data[self.config.visual_key] = dataset.all_obs(self.config.visual_key)
         self.normalizer.fit(data)
 
     def normalizer_stats(self) -> dict[str, dict[str, np.ndarray]]:
         return self.normalizer.stats()
+
+    # ---- action frame ------------------------------------------------------------------
+    def _action_anchor(self, state: np.ndarray | torch.Tensor) -> torch.Tensor | float:
+        """What turns predicted actions into world-frame ones: (B, 1, action_dim) holding the EE position of the
+        last observed step (state (B, To, state_dim), raw) in the position columns, or 0 for absolute actions."""
+        if self.config.action_frame == "absolute":
+            return 0.0
+        state = torch.as_tensor(state, device=self.device).float()
+        anchor = torch.zeros(state.shape[0], 1, self.config.action_dim, device=self.device)
+        anchor[:, 0, :3] = state[:, -1, :3]
+        return anchor
+
+    def normalize_actions(self, actions: torch.Tensor, state: np.ndarray | torch.Tensor) -> torch.Tensor:
+        """World-frame actions (B, H, action_dim) -> the normalised trajectory the UNet denoises."""
+        return self.normalizer.normalize("action", actions - self._action_anchor(state))
+
+    def unnormalize_actions(self, trajectory: torch.Tensor, state: np.ndarray | torch.Tensor) -> torch.Tensor:
+        """The UNet's normalised trajectory (B, H, action_dim) -> world-frame actions (differentiable)."""
+        return self.normalizer.unnormalize("action", trajectory) + self._action_anchor(state)
 
     # ---- observation -------------------------------------------------------------------
     def _prepare_obs(self, obs: Mapping[str, np.ndarray | torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -139,7 +170,7 @@ class DiffusionPolicy(nn.Module):
             raise ValueError(f"action batch must be (B, {self.config.horizon}, {self.config.action_dim}), "
                              f"got {tuple(actions.shape)}")
         cond = self.encode_obs(batch["obs"])
-        trajectory = self.normalizer.normalize("action", actions)
+        trajectory = self.normalize_actions(actions, batch["obs"]["state"])
         noise = torch.randn(trajectory.shape, generator=generator, device=self.device)
         timesteps = torch.randint(0, self.config.num_train_timesteps, (trajectory.shape[0],), generator=generator,
                                   device=self.device)
@@ -196,12 +227,13 @@ class DiffusionPolicy(nn.Module):
             with torch.no_grad():
                 cond = self.encode_obs(obs)
             batch = cond.shape[0]
+            state = obs["state"]
 
             def noise_fn(sample: torch.Tensor, timesteps: torch.Tensor) -> torch.Tensor:
                 return self.unet(sample, timesteps.to(sample.device), cond)
 
             def cost_fn(trajectory: torch.Tensor) -> torch.Tensor:
-                return position_cost(self.normalizer.unnormalize("action", trajectory)[..., :3])
+                return position_cost(self.unnormalize_actions(trajectory, state)[..., :3])
 
             if initial_noise is not None:
                 initial_noise = torch.as_tensor(initial_noise, device=self.device).float()
@@ -212,7 +244,7 @@ class DiffusionPolicy(nn.Module):
                                  num_inference_steps=num_inference_steps, generator=generator, guidance=guidance,
                                  cost_fn=cost_fn if guided else None, initial_noise=initial_noise, on_step=on_step)
             with torch.no_grad():
-                trajectory = self.normalizer.unnormalize("action", normalised.detach())
+                trajectory = self.unnormalize_actions(normalised.detach(), state)
         finally:
             self.train(was_training)
         start = config.n_obs_steps - 1
@@ -272,8 +304,8 @@ class DiffusionPolicy(nn.Module):
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         state = {key: value.detach().cpu().contiguous() for key, value in self.state_dict().items()}
-        save_safetensors(state, directory / WEIGHTS_NAME,
-                         metadata={"format": "lano3dp-policy", "format_version": str(CHECKPOINT_FORMAT_VERSION)})
+        metadata = {"format": "lano3dp-policy", "format_version": str(format_version_for(self.config))}
+        save_safetensors(state, directory / WEIGHTS_NAME, metadata=metadata)
         stats = {key: {name: value.tolist() for name, value in item.items()}
                  for key, item in self.normalizer_stats().items()}
         _write_text(directory / NORMALIZER_NAME, json.dumps(stats, indent=2))
@@ -300,6 +332,23 @@ class DiffusionPolicy(nn.Module):
         if not bool(policy.normalizer.fitted):
             raise CorruptFileError(directory / WEIGHTS_NAME, "holds no normaliser statistics")
         return policy.to(device).eval()
+
+
+def relative_action_rows(actions: list[np.ndarray], states: list[np.ndarray], n_obs_steps: int,
+                         horizon: int) -> np.ndarray:
+    """Every action of every training window as an offset from the window's EE position "now" (the last
+    observed step), as (rows, action_dim): what the normaliser of relative actions is fitted on.
+
+    actions, states: per episode, (T, action_dim) and (T, state_dim). Windows are edge-padded as in training.
+    """
+    rows = []
+    for episode_actions, episode_states in zip(actions, states):
+        length = len(episode_actions)
+        take = np.clip(np.arange(length)[:, None] - (n_obs_steps - 1) + np.arange(horizon)[None], 0, length - 1)
+        windows = np.array(episode_actions[take], dtype=np.float64)  # (T, H, action_dim), "now" = row t
+        windows[..., :3] -= episode_states[:, None, :3]
+        rows.append(windows.reshape(-1, windows.shape[-1]))
+    return np.concatenate(rows, axis=0)
 
 
 def _write_text(path: Path, text: str) -> None:

@@ -17,7 +17,7 @@ import torch
 
 from lano3dp.errors import Lano3dpError
 from lano3dp.policy.modeling import (
-    CHECKPOINT_FORMAT_VERSION,
+    format_version_for,
     CONFIG_NAME,
     NORMALIZER_NAME,
     WEIGHTS_NAME,
@@ -82,7 +82,7 @@ def export_fp16(checkpoint: str | Path, out: str | Path, record: dict[str, Any] 
         state[key] = value
     # the checksum is over the fp16 values the file holds, so loading checks what is on disk
     save_safetensors(state, out / WEIGHTS_NAME, metadata={"format": "lano3dp-policy",
-                                                          "format_version": str(CHECKPOINT_FORMAT_VERSION),
+                                                          "format_version": str(format_version_for(policy.config)),
                                                           "weights_dtype": "float16"})
     for name in (CONFIG_NAME, NORMALIZER_NAME):
         shutil.copy2(source / name, out / name)

@@ -91,3 +91,31 @@ def test_noise_injection_moves_the_robot_off_the_expert_path_but_records_the_exp
     assert weights.max() == 1.0
     with __import__("pytest").raises(ValueError, match="dart_noise"):
         collect("put_item_in_drawer", 1, tmp_path / "bad.zarr", dart_noise=0.5, progress=False)
+
+
+def test_episodes_go_on_past_the_first_success_while_it_holds(tmp_path):
+    """The cap counts as off 3 cm up the neck; the expert pulls 5 cm. Cut at the first success frame, the data
+    would end at 3 cm and teach a policy to stop there; with follow-through it shows the rest of the pull."""
+    import pytest
+
+    from lano3dp.data.collect import CollectionError
+    from lano3dp.sim import TabletopEnv
+
+    cut = collect("open_wine_bottle", 1, tmp_path / "cut.zarr", image_size=32, n_points=16, progress=False,
+                  follow_through_s=0.0)
+    full = collect("open_wine_bottle", 1, tmp_path / "full.zarr", image_size=32, n_points=16, progress=False)
+    cut_actions = EpisodeStore.open(cut.path).get_episode(0)["action"]
+    full_actions = EpisodeStore.open(full.path).get_episode(0)["action"]
+    assert EpisodeStore.open(full.path).attrs["follow_through_s"] == 1.0
+    assert len(full_actions) == len(cut_actions) + 10  # 1 s at 10 Hz
+    np.testing.assert_array_equal(full_actions[:len(cut_actions)], cut_actions)
+    assert full_actions[-1, 2] > cut_actions[-1, 2] + 0.01  # it pulled on
+    # replaying the recorded actions ends in success: the tail kept only steps where success held
+    env = TabletopEnv("open_wine_bottle", image_size=32)
+    env.reset(seed=EpisodeStore.open(full.path).attrs["episode_seeds"][0])
+    for action in full_actions:
+        info = env.step(action)[-1]
+    assert info["success"]
+    env.close()
+    with pytest.raises(CollectionError, match="follow_through_s=0.0"):  # a store made without it is not mixed
+        collect("open_wine_bottle", 2, tmp_path / "cut.zarr", image_size=32, n_points=16, progress=False)

@@ -46,6 +46,10 @@ def collect_command(
     dart_noise: float = typer.Option(0.0, "--dart-noise", min=0.0, max=0.1,
                                      help="Noise injection (DART): spread (m) of a smooth offset added to the "
                                           "executed positions while the expert's own actions are recorded."),
+    follow_through: float = typer.Option(1.0, "--follow-through", min=0.0, max=10.0,
+                                         help="Seconds recorded past the first success frame, while success "
+                                              "holds (0: end there; an env must then accept steps after "
+                                              "reporting success)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
     env: str = typer.Option(None, "--env", help=_ENV_HELP),
     expert: str = typer.Option(None, "--expert", help="With --env: module:callable or path/to/file.py:callable, "
@@ -78,7 +82,7 @@ def collect_command(
         _options.variation(variation)
         result = collect(task, episodes, out, variation=variation, seed=seed, image_size=image_size,
                          n_points=n_points, dart_noise=dart_noise, progress=progress, max_steps=max_steps,
-                         table_height=table_height)
+                         table_height=table_height, follow_through_s=follow_through)
     else:
         _options.env_factory(env)
         _options.env_factory(expert, "--expert")
@@ -87,7 +91,7 @@ def collect_command(
         result = collect_from_env(env, expert, episodes, out, task=task, variation=variation, seed=seed,
                                   image_size=image_size, n_points=n_points, progress=progress,
                                   slots=None if slots is None else _names(slots), control_hz=control_hz,
-                                  max_steps=max_steps, table_height=table_height,
+                                  max_steps=max_steps, table_height=table_height, follow_through_s=follow_through,
                                   crop_low=_point(crop_low, "--crop-low"), crop_high=_point(crop_high, "--crop-high"))
     failed = f", {len(result.failed_seeds)} expert failures skipped (seeds {result.failed_seeds})" \
         if result.failed_seeds else ""

@@ -17,8 +17,11 @@ or obs rgb/depth/intrinsics/cam_to_world), and success from `info["success"]`. R
     scene_cloud     (512, 3)        cropped scene above the table height (DP3 baseline)
     rgb             (96, 96, 3)     uint8 (Diffusion Policy baseline)
 
-Only successful expert episodes are kept; an episode ends at the step info["success"] first
-becomes true. Episode i (0-based, in the store) uses the first successful seed among
+Only successful expert episodes are kept. Recording goes on for `follow_through_s` seconds after the step
+info["success"] first becomes true (the expert's own follow-through: the cap pulled on past the 3 cm that
+count, the gripper opened and backed away), and ends at the last of those steps where success still holds.
+Demonstrations cut at the first success frame taught policies to stop exactly at the threshold, where a
+policy a few millimetres short then hovered until its time ran out. Episode i (0-based, in the store) uses the first successful seed among
 `seed + i`, `seed + i + SEED_STRIDE`, `seed + i + 2 * SEED_STRIDE`, ... so the dataset is
 the same whether it was collected in one run or resumed: re-running with the same output
 appends only the missing episodes (the store's episode count says how many exist).
@@ -81,6 +84,7 @@ class CollectConfig:
     min_points: int = 10
     max_steps: int | None = None  # episode limit (default: the task's); an expert that needs more fails
     dart_noise: float = 0.0  # m, spread of the injected position offset (0: the expert as it is)
+    follow_through_s: float = 1.0  # s recorded past the first success (0: end at the first success frame)
     progress: bool = True
     # A user's env (see collect_from_env); all None: the built-in simulator and the task's open-loop plan.
     env: Any = None  # 'module:factory', 'path/to/file.py:factory', a factory, or an env object
@@ -97,6 +101,8 @@ class CollectConfig:
                 raise ValueError(f"CollectConfig: {name} must be >= 1, got {getattr(self, name)}")
         if not 0 <= self.dart_noise <= 0.1:
             raise ValueError(f"CollectConfig: dart_noise is metres in [0, 0.1], got {self.dart_noise}")
+        if not 0 <= self.follow_through_s <= 10:
+            raise ValueError(f"CollectConfig: follow_through_s is seconds in [0, 10], got {self.follow_through_s}")
         if self.max_steps is not None and self.max_steps < 1:
             raise ValueError(f"CollectConfig: max_steps must be >= 1, got {self.max_steps}")
         if self.dart_noise > 0 and self.expert is not None:
@@ -249,12 +255,15 @@ def _collect_episodes(config: CollectConfig) -> CollectResult:
             "seed_stride": SEED_STRIDE,
             "source": "scripted expert, successful episodes only",
             "dart_noise": config.dart_noise,
+            "follow_through_s": config.follow_through_s,
         }
         if source.env_name is not None:  # a user's env: what made the data, and where its table is
             attrs |= {"env": source.env_name, "expert": _name(config.expert), "table_height": config.table_height}
         store = EpisodeStore.open_or_create(config.out, attrs)
-        existing = store.attrs
-        for key in ("task", "variation", "n_points", "base_seed", "dart_noise", "env", "table_height"):
+        existing = dict(store.attrs)
+        existing.setdefault("follow_through_s", 0.0)  # stores from before it ended at the first success
+        for key in ("task", "variation", "n_points", "base_seed", "dart_noise", "follow_through_s", "env",
+                    "table_height"):
             if key in existing and existing.get(key) != attrs.get(key):
                 raise CollectionError(f"{config.out} was collected with {key}={existing[key]!r}, not "
                                       f"{attrs.get(key)!r}; use another --out or the same settings to resume")
@@ -387,10 +396,11 @@ def record_episode(env, observer, seed: int, config: CollectConfig, expert: Call
     rows: dict[str, list[np.ndarray]] = {k: [] for k in ("action", "state", "object_clouds", "scene_cloud", "rgb")}
     last_clouds: list[np.ndarray | None] = [None] * len(phrases)
     held = 0
-    success = False
+    follow_steps = int(round(config.follow_through_s * source.control_hz))
+    first_success = last_success = None  # step indices
     noise = DartNoise(config.dart_noise, seed, getattr(expert, "actions", None), source.control_hz)
     frame = None
-    for t in range(source.max_steps):
+    for t in range(source.max_steps + follow_steps):
         frame, state = observe(env, obs)
         try:
             clouds = list(observer.observe(frame, phrases).points)
@@ -417,13 +427,16 @@ def record_episode(env, observer, seed: int, config: CollectConfig, expert: Call
         rows["rgb"].append(resize_rgb(frame.rgb, config.rgb_size))
         obs, _, terminated, truncated, info = env.step(noise.perturb(action, t))
         if info.get("success"):
-            success = True
+            first_success = t if first_success is None else first_success
+            last_success = t
+        # after the first success an env's `terminated` only repeats it; a truncation still ends the episode
+        if first_success is None and (terminated or truncated) or truncated and first_success is not None:
             break
-        if terminated or truncated:
+        if first_success is not None and t - first_success >= follow_steps:
             break
-    if not success:
+    if first_success is None:
         return None, 0, None
-    episode = {key: np.stack(values) for key, values in rows.items()}
+    episode = {key: np.stack(values[:last_success + 1]) for key, values in rows.items()}
     for key in ("action", "state", "object_clouds", "scene_cloud"):
         episode[key] = episode[key].astype(np.float32)
     camera = getattr(getattr(env, "env", env), "camera", None)

@@ -7,7 +7,8 @@ from lano3dp.guidance import Cylinder, Densified, GuidanceConfig, GuidanceMode, 
 from lano3dp.policy import DiffusionPolicy, PolicyConfig
 
 TINY = dict(object_names=("target",), down_dims=(16, 32), diffusion_step_embed_dim=16, n_groups=4,
-            point_hidden_dims=(16, 32), encoder_out=16, state_feature_dim=16, n_points=16)
+            point_hidden_dims=(16, 32), encoder_out=16, state_feature_dim=16, n_points=16,
+            action_frame="absolute")  # the action range below is world positions
 # demonstrations spanning 8 cm sideways (x) and 60 cm along the path (y), as in bench/bench_guidance.py
 ACTION_MIN = np.array([-0.04, -0.3, 0.1, *[-1.0] * 6, 0.0])
 ACTION_MAX = np.array([0.04, 0.3, 0.2, *[1.0] * 6, 1.0])

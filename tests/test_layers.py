@@ -25,8 +25,6 @@ RANK = {part: rank for rank, parts in enumerate(LAYERS) for part in parts}
 KNOWN_EXCEPTIONS = {
     ("lano3dp.data.collect", "sim"): "collection builds TabletopEnv and runs its expert from a task name "
                                      "(issue #12 item 3: take an env and an expert instead)",
-    ("lano3dp.data.collect", "runtime"): "collection from a user's env reads its observations with runtime.observe, "
-                                         "as evaluation does; observe belongs a layer down, with the frame type",
     ("lano3dp.data.collect", "env_factory"): "collection makes a user's env from --env through the same factory as "
                                              "eval; collect is an orchestration stage filed under data",
     ("lano3dp.data.collect", "locking"): "collection locks its output store with locking.WriteLock, a small "

@@ -62,6 +62,7 @@ def test_config_defaults_follow_the_paper_and_the_cpu_budget():
     assert (config.n_obs_steps, config.horizon, config.n_action_steps) == (1, 16, 8)
     assert config.down_dims == (48, 96, 192) and config.kernel_size == 5 and config.n_groups == 8
     assert config.point_encoder == "residual" and config.encoder_out == 64 and config.n_points == 64
+    assert config.action_frame == "relative"
     assert (config.num_train_timesteps, config.beta_schedule, config.prediction_type) == (
         100, "squaredcos_cap_v2", "epsilon")
 
@@ -256,7 +257,7 @@ def test_guidance_cost_sees_metric_positions_and_pushes_the_trajectory():
     # The cost saw the un-normalised clean estimate A_0|k, positions only.
     for positions, step in zip(seen, steps, strict=True):
         assert step.guided
-        assert torch.allclose(positions, policy.normalizer.unnormalize("action", step.clean_estimate)[..., :3],
+        assert torch.allclose(positions, policy.unnormalize_actions(step.clean_estimate, obs["state"])[..., :3],
                               atol=1e-4)
     assert not torch.allclose(guided.trajectory, plain.trajectory)
 
@@ -357,16 +358,21 @@ def test_relative_actions_are_world_frame_outside_the_policy_and_follow_the_hand
     assert torch.allclose(after[..., :3] - before[..., :3], torch.as_tensor(shift).expand(2, 16, 3), atol=1e-5)
     assert torch.allclose(after[..., 3:], before[..., 3:], atol=1e-5)
     seen = []
+    def cost(positions):
+        seen.append(positions.detach())
+        return positions.sum((1, 2))
+
     policy.predict_action_chunk(moved, scheduler="ddim", initial_noise=noise, guidance=GuidanceConfig(scale=1e-9),
-                                position_cost=lambda positions: seen.append(positions.detach()) or positions.sum((1, 2)))
+                                position_cost=cost)
     assert torch.allclose(seen[-1], after[..., :3], atol=1e-4)
 
 
 def test_relative_normaliser_is_fitted_on_the_offsets_of_training_windows():
     from lano3dp.policy.modeling import relative_action_rows
 
-    states = np.zeros((5, 11)); states[:, 0] = np.arange(5.0)  # the hand moves 1 m per step along x
-    actions = np.zeros((5, 10)); actions[:, 0] = np.arange(5.0) + 1.0  # each action one step ahead
+    states, actions = np.zeros((5, 11)), np.zeros((5, 10))
+    states[:, 0] = np.arange(5.0)  # the hand moves 1 m per step along x
+    actions[:, 0] = np.arange(5.0) + 1.0  # each action one step ahead
     rows = relative_action_rows([actions], [states], n_obs_steps=2, horizon=4)
     # window of "now" t holds actions t-1 .. t+2 (edge-padded): offsets 0, 1, 2, 3 away from the edges
     assert rows.shape == (5 * 4, 10)
@@ -383,7 +389,7 @@ def test_a_relative_checkpoint_round_trips_and_carries_format_version_two(tmp_pa
     policy.save_pretrained(tmp_path / "ckpt")
     with safe_open(str(tmp_path / "ckpt" / "model.safetensors"), framework="pt") as handle:
         assert handle.metadata()["format_version"] == "2"
-    make_policy().save_pretrained(tmp_path / "absolute")  # absolute stays readable by older releases
+    make_policy(action_frame="absolute").save_pretrained(tmp_path / "absolute")  # older releases read these
     with safe_open(str(tmp_path / "absolute" / "model.safetensors"), framework="pt") as handle:
         assert handle.metadata()["format_version"] == "1"
     loaded = DiffusionPolicy.from_pretrained(tmp_path / "ckpt")

@@ -35,7 +35,7 @@ import numpy as np
 import torch
 
 from lano3dp.errors import EmptyCloudError, Lano3dpError
-from lano3dp.geometry.frame import RGBDFrame
+from lano3dp.geometry.frame import RGBDFrame, observe, resize_rgb  # noqa: F401 (observe: part of the API)
 from lano3dp.guidance.checked import CheckConfig, checked_sample
 from lano3dp.guidance.costs import (
     Densified,
@@ -212,55 +212,10 @@ class ChunkRecord:
     trajectory: np.ndarray | None = None
 
 
-def observe(env, obs: Any) -> tuple[RGBDFrame, np.ndarray]:
-    """The env's observation -> (frame, state (11,) float32).
-
-    The frame is `obs["frame"]` when the observation carries one, else `env.frame()` (the simulator's
-    RGBDFrame with ground-truth instances), else it is assembled from the observation's "rgb", "depth",
-    "intrinsics" and "cam_to_world" (and "segmentation" when present).
-    """
-    if isinstance(obs, Mapping):
-        if "state" not in obs:
-            raise KeyError(f"observation needs a 'state' (11,), got keys {sorted(obs)}")
-        state = obs["state"]
-        if "frame" in obs:
-            frame = obs["frame"]
-        elif callable(getattr(env, "frame", None)):
-            frame = env.frame()
-        else:
-            from lano3dp.geometry.camera import PinholeCamera
-
-            depth = np.asarray(obs["depth"], dtype=np.float32)
-            height, width = depth.shape
-            rgb = obs.get("rgb")
-            frame = RGBDFrame(rgb=np.zeros((height, width, 3), np.uint8) if rgb is None else rgb, depth=depth,
-                              camera=PinholeCamera(width, height, obs["intrinsics"], obs["cam_to_world"]),
-                              segmentation=obs.get("segmentation"))
-    else:
-        frame, state = obs.frame, obs.state
-    if not isinstance(frame, RGBDFrame):
-        raise TypeError(f"observation 'frame' must be an RGBDFrame, got {type(frame).__name__}")
-    state = np.asarray(state, dtype=np.float32)
-    if state.shape != (11,):
-        raise ValueError(f"robot state must be (11,), got {state.shape}")
-    return frame, state
-
-
 def scene_obstacles(frame: RGBDFrame) -> list[str]:
     """Names of the objects the simulator marks as obstacles (ground truth; for evaluation defaults)."""
     return sorted(name for name, attributes in frame.instance_attributes.items()
                   if attributes.get("role") == "obstacle")
-
-
-def resize_rgb(rgb: np.ndarray, size: int) -> np.ndarray:
-    """(H, W, 3) uint8 -> (size, size, 3) uint8, area-averaged with PIL's box filter: exactly what the
-    demonstration collector stores (`data.collect.resize_rgb`), so the image baseline sees the same pixels."""
-    if rgb.shape[:2] == (size, size):
-        return np.ascontiguousarray(rgb, dtype=np.uint8)
-    from PIL import Image
-
-    return np.asarray(Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8)).resize(
-        (size, size), Image.Resampling.BOX))
 
 
 _UNCHANGED = object()  # set_objects' "leave as is", since None means "nothing held"

@@ -6,7 +6,7 @@ scripted open-loop plan the expert), or any env meeting `lano3dp.sim.protocol.Si
 with a closed-loop expert `expert(env, obs, info) -> action (10,)` called every step
 (`collect_from_env`; on the command line `lano3dp collect --env module:factory --expert module:callable
 --slots block,drawer`). For a user's env the slots, control rate and step limit come from the caller or
-the env (`env.control_hz`, `env.max_steps`), the frame from `runtime.observe` (obs["frame"], env.frame(),
+the env (`env.control_hz`, `env.max_steps`), the frame from `geometry.frame.observe` (obs["frame"], env.frame(),
 or obs rgb/depth/intrinsics/cam_to_world), and success from `info["success"]`. Recorded:
 
     action          (10,) float32   absolute EE pose + gripper the expert commanded
@@ -21,10 +21,12 @@ Only successful expert episodes are kept. Recording goes on for `follow_through_
 info["success"] first becomes true (the expert's own follow-through: the cap pulled on past the 3 cm that
 count, the gripper opened and backed away), and ends at the last of those steps where success still holds.
 Demonstrations cut at the first success frame taught policies to stop exactly at the threshold, where a
-policy a few millimetres short then hovered until its time ran out. Episode i (0-based, in the store) uses the first successful seed among
-`seed + i`, `seed + i + SEED_STRIDE`, `seed + i + 2 * SEED_STRIDE`, ... so the dataset is
-the same whether it was collected in one run or resumed: re-running with the same output
-appends only the missing episodes (the store's episode count says how many exist).
+policy a few millimetres short then hovered until its time ran out.
+
+Episode i (0-based, in the store) uses the first successful seed among `seed + i`, `seed + i + SEED_STRIDE`,
+`seed + i + 2 * SEED_STRIDE`, ... so the dataset is the same whether it was collected in one run or resumed:
+re-running with the same output appends only the missing episodes (the store's episode count says how many
+exist).
 
 Noise injection (DART, Laskey et al. 2017; `dart_noise` > 0): the executed action is the expert's plus a
 smooth random offset of the position (an Ornstein-Uhlenbeck process, `dart_noise` metres stationary
@@ -53,6 +55,7 @@ import numpy as np
 
 from lano3dp.data.store import EpisodeStore
 from lano3dp.errors import Lano3dpError
+from lano3dp.geometry.frame import observe, resize_rgb
 
 SEED_STRIDE = 100_003  # fallback seeds of episode i: seed + i + k * SEED_STRIDE (k = 0, 1, ...)
 MAX_TRIES = 5          # seeds tried per episode before giving up
@@ -384,7 +387,6 @@ def record_episode(env, observer, seed: int, config: CollectConfig, expert: Call
     """Run the expert on `seed`; the episode's arrays if it succeeded, else None. Also the held-cloud count
     and the camera of the last frame (`PinholeCamera.to_dict()`)."""
     from lano3dp.perception import PerceptionError, scene_cloud
-    from lano3dp.runtime import observe
 
     expert = OpenLoopPlan() if expert is None else expert
     source = _Source.of(env, "the env", config) if source is None else source
@@ -477,15 +479,6 @@ class DartNoise:
         perturbed = np.array(action, dtype=np.float32, copy=True)
         perturbed[:3] += self.weights[min(step, len(self.weights) - 1)] * self.offset
         return perturbed
-
-
-def resize_rgb(rgb: np.ndarray, size: int) -> np.ndarray:
-    """(H, W, 3) uint8 -> (size, size, 3) uint8, area-averaged (PIL's box filter)."""
-    if rgb.shape[0] == size and rgb.shape[1] == size:
-        return rgb
-    from PIL import Image
-
-    return np.asarray(Image.fromarray(rgb).resize((size, size), Image.Resampling.BOX))
 
 
 def config_dict(config: CollectConfig) -> dict:

@@ -1,8 +1,11 @@
-"""The one frame type every image source yields (simulator, RealSense, a user's robot)."""
+"""The one frame type every image source yields (simulator, RealSense, a user's robot), and how an env's
+observation becomes one (`observe`, shared by collection and the runtime)."""
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -43,3 +46,46 @@ class RGBDFrame:
             )
         if self.segmentation is not None and self.segmentation.shape[:2] != (h, w):
             raise ValueError(f"segmentation {self.segmentation.shape} does not match depth {self.depth.shape}")
+
+
+def observe(env, obs: Any) -> tuple[RGBDFrame, np.ndarray]:
+    """The env's observation -> (frame, state (11,) float32).
+
+    The frame is `obs["frame"]` when the observation carries one, else `env.frame()` (the simulator's
+    RGBDFrame with ground-truth instances), else it is assembled from the observation's "rgb", "depth",
+    "intrinsics" and "cam_to_world" (and "segmentation" when present).
+    """
+    if isinstance(obs, Mapping):
+        if "state" not in obs:
+            raise KeyError(f"observation needs a 'state' (11,), got keys {sorted(obs)}")
+        state = obs["state"]
+        if "frame" in obs:
+            frame = obs["frame"]
+        elif callable(getattr(env, "frame", None)):
+            frame = env.frame()
+        else:
+            depth = np.asarray(obs["depth"], dtype=np.float32)
+            height, width = depth.shape
+            rgb = obs.get("rgb")
+            frame = RGBDFrame(rgb=np.zeros((height, width, 3), np.uint8) if rgb is None else rgb, depth=depth,
+                              camera=PinholeCamera(width, height, obs["intrinsics"], obs["cam_to_world"]),
+                              segmentation=obs.get("segmentation"))
+    else:
+        frame, state = obs.frame, obs.state
+    if not isinstance(frame, RGBDFrame):
+        raise TypeError(f"observation 'frame' must be an RGBDFrame, got {type(frame).__name__}")
+    state = np.asarray(state, dtype=np.float32)
+    if state.shape != (11,):
+        raise ValueError(f"robot state must be (11,), got {state.shape}")
+    return frame, state
+
+
+def resize_rgb(rgb: np.ndarray, size: int) -> np.ndarray:
+    """(H, W, 3) uint8 -> (size, size, 3) uint8, area-averaged with PIL's box filter: what the demonstration
+    collector stores and the runtime feeds the image baseline: one function, so both see the same pixels."""
+    if rgb.shape[:2] == (size, size):
+        return np.ascontiguousarray(rgb, dtype=np.uint8)
+    from PIL import Image
+
+    return np.asarray(Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8)).resize(
+        (size, size), Image.Resampling.BOX))

@@ -342,7 +342,7 @@ def relative_action_rows(actions: list[np.ndarray], states: list[np.ndarray], n_
     actions, states: per episode, (T, action_dim) and (T, state_dim). Windows are edge-padded as in training.
     """
     rows = []
-    for episode_actions, episode_states in zip(actions, states):
+    for episode_actions, episode_states in zip(actions, states, strict=True):
         length = len(episode_actions)
         take = np.clip(np.arange(length)[:, None] - (n_obs_steps - 1) + np.arange(horizon)[None], 0, length - 1)
         windows = np.array(episode_actions[take], dtype=np.float64)  # (T, H, action_dim), "now" = row t

@@ -17,11 +17,11 @@ import torch
 
 from lano3dp.errors import Lano3dpError
 from lano3dp.policy.modeling import (
-    format_version_for,
     CONFIG_NAME,
     NORMALIZER_NAME,
     WEIGHTS_NAME,
     DiffusionPolicy,
+    format_version_for,
     resolve_checkpoint,
     save_safetensors,
 )

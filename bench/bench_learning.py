@@ -1,7 +1,8 @@
 """Success against CPU-minutes of training, per task and training recipe.
 
 Per task and recipe (`--recipes`, from RECIPES below) and training seed:
-  1. collect `--demos` scripted-expert demonstrations of clean scenes, with the recipe's points per object;
+  1. collect `--demos` scripted-expert demonstrations of clean scenes, with the recipe's points per object
+     (each with 1 s of the expert's follow-through past its first success frame, `data.collect`);
   2. train for a budget of `--minutes` CPU-minutes (this process's CPU time, so other jobs on the machine
      change the wall time, not the number of steps), checkpointing `--checkpoints` times along the way;
   3. evaluate every checkpoint on clean episodes under the simulator's motion limits: `--episodes` at the
@@ -16,7 +17,7 @@ with the same configuration is skipped. Outputs:
 
 One process per task over one --work folder uses both cores:
 
-    OMP_NUM_THREADS=1 python bench/bench_learning.py --tasks open_drawer --recipes compact,previous --minutes 10
+    OMP_NUM_THREADS=1 python bench/bench_learning.py --tasks open_drawer --recipes relative,compact --minutes 10
 """
 
 from __future__ import annotations
@@ -43,11 +44,20 @@ PAPER_TASKS = ("open_drawer", "open_wine_bottle", "sweep_to_dustpan", "phone_on_
 # Policy settings per recipe; everything else (optimiser, schedule, EMA) is shared. "previous" is the
 # default before the learning-efficiency work (d63c154), kept to measure the new one against.
 RECIPES = {
-    "compact": {"points": 64, "policy": {}},
+    # the compact policy (PolicyConfig's sizes) predicting world positions, as first measured
+    "compact": {"points": 64, "policy": {"action_frame": "absolute"}},
+    # ... on demonstrations that end at the first success frame, as collected before follow-through (6a5aa3c)
+    "compact_cut": {"points": 64, "policy": {"action_frame": "absolute"}, "collect": {"follow_through_s": 0.0}},
     # the compact recipe on demonstrations with injected noise (DART): states off the expert's path, labelled
     # with the way back (`data.collect`, issue 14: policies lost their way after an obstacle detour)
-    "dart": {"points": 64, "policy": {}, "collect": {"dart_noise": 0.03}},
-    "previous": {"points": 128, "policy": dict(n_obs_steps=2, down_dims=(64, 128, 256),
+    "dart": {"points": 64, "policy": {"action_frame": "absolute"}, "collect": {"dart_noise": 0.03}},
+    # the compact policy predicting positions as offsets from the hand (PolicyConfig.action_frame, now the
+    # default): an absolute target must also re-derive where the hand is, and 1-2 cm errors there stalled
+    # the fine stages
+    "relative": {"points": 64, "policy": {"action_frame": "relative"}},
+    # ... seeing two observation steps: how fast the hand moves, where one frame is the same while holding
+    "relative_to2": {"points": 64, "policy": {"action_frame": "relative", "n_obs_steps": 2}},
+    "previous": {"points": 128, "policy": dict(action_frame="absolute", n_obs_steps=2, down_dims=(64, 128, 256),
                                                point_hidden_dims=(64, 128, 256), diffusion_step_embed_dim=128)},
 }
 
@@ -56,7 +66,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--tasks", default=",".join(PAPER_TASKS), help="comma-separated simulator tasks")
-    parser.add_argument("--recipes", default="compact", help=f"comma-separated, from {sorted(RECIPES)}")
+    parser.add_argument("--recipes", default="relative", help=f"comma-separated, from {sorted(RECIPES)}")
     parser.add_argument("--seeds", default="0", help="comma-separated training seeds")
     parser.add_argument("--demos", type=int, default=40)
     parser.add_argument("--minutes", type=float, default=20.0, help="training budget, CPU-minutes")

@@ -1,0 +1,29 @@
+"""The packaged-policy benchmark evaluates a shipped policy on held-out seeds beside its record."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+pytestmark = pytest.mark.slow
+
+
+def test_a_shipped_policy_is_scored_on_held_out_seeds_beside_its_record(tmp_path):
+    spec = importlib.util.spec_from_file_location("bench_packaged", ROOT / "bench" / "bench_packaged.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    bench.main(["--tasks", "close_microwave", "--episodes", "2", "--workers", "1", "--work", str(tmp_path / "work"),
+                "--results", str(tmp_path)])
+    report = json.loads((tmp_path / "packaged.json").read_text())
+    (row,) = report["rows"]
+    assert report["seed"] == 2_000_000 and row["task"] == "close_microwave" and row["episodes"] == 2
+    assert row["recorded_success"] is not None and row["recorded_within_interval"] in (True, False)
+    low, high = row["ci95"]
+    assert low <= row["success_rate"] <= high
+    evaluated = json.loads((tmp_path / "work" / "close_microwave.json").read_text())
+    assert evaluated["config"]["seed"] == 2_000_000  # held out from the record's 1000000 + i
+    assert "bench/bench_packaged.py --tasks close_microwave" in (tmp_path / "packaged.md").read_text()

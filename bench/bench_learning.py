@@ -17,7 +17,7 @@ with the same configuration is skipped. Outputs:
 
 One process per task over one --work folder uses both cores:
 
-    OMP_NUM_THREADS=1 python bench/bench_learning.py --tasks open_drawer --recipes relative,compact --minutes 10
+    OMP_NUM_THREADS=1 python bench/bench_learning.py --tasks open_drawer --recipes compact,relative --minutes 10
 """
 
 from __future__ import annotations
@@ -51,9 +51,8 @@ RECIPES = {
     # the compact recipe on demonstrations with injected noise (DART): states off the expert's path, labelled
     # with the way back (`data.collect`, issue 14: policies lost their way after an obstacle detour)
     "dart": {"points": 64, "policy": {"action_frame": "absolute"}, "collect": {"dart_noise": 0.03}},
-    # the compact policy predicting positions as offsets from the hand (PolicyConfig.action_frame, now the
-    # default): an absolute target must also re-derive where the hand is, and 1-2 cm errors there stalled
-    # the fine stages
+    # the compact policy predicting positions as offsets from the hand (PolicyConfig.action_frame): an
+    # absolute target must also re-derive where the hand is, which looked like what stalled the fine stages
     "relative": {"points": 64, "policy": {"action_frame": "relative"}},
     # ... seeing two observation steps: how fast the hand moves, where one frame is the same while holding
     "relative_to2": {"points": 64, "policy": {"action_frame": "relative", "n_obs_steps": 2}},
@@ -66,7 +65,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--tasks", default=",".join(PAPER_TASKS), help="comma-separated simulator tasks")
-    parser.add_argument("--recipes", default="relative", help=f"comma-separated, from {sorted(RECIPES)}")
+    parser.add_argument("--recipes", default="compact", help=f"comma-separated, from {sorted(RECIPES)}")
     parser.add_argument("--seeds", default="0", help="comma-separated training seeds")
     parser.add_argument("--demos", type=int, default=40)
     parser.add_argument("--minutes", type=float, default=20.0, help="training budget, CPU-minutes")

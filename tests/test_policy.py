@@ -62,7 +62,7 @@ def test_config_defaults_follow_the_paper_and_the_cpu_budget():
     assert (config.n_obs_steps, config.horizon, config.n_action_steps) == (1, 16, 8)
     assert config.down_dims == (48, 96, 192) and config.kernel_size == 5 and config.n_groups == 8
     assert config.point_encoder == "residual" and config.encoder_out == 64 and config.n_points == 64
-    assert config.action_frame == "relative"
+    assert config.action_frame == "absolute"
     assert (config.num_train_timesteps, config.beta_schedule, config.prediction_type) == (
         100, "squaredcos_cap_v2", "epsilon")
 

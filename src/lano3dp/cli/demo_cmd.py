@@ -63,8 +63,8 @@ def demo_command(
 
 
 # Training steps (batch 64, the default recipe, 40 demonstrations) by which bench/bench_learning.py measured a
-# task's success near its final value (results/learning.json: put_item_in_drawer 50% at 3244 steps, 90% at
-# 4865; open_drawer 80% at 3572, 86% at 5357); a demo policy with fewer is called under-trained.
+# task's success near its final value (results/learning_cut_at_success.json: put_item_in_drawer 50% at 3244
+# steps, 90% at 4865; open_drawer 80% at 3572, 86% at 5357); a demo policy with fewer is called under-trained.
 STEPS_TO_LEARN: dict[str, int] = {"put_item_in_drawer": 4500, "open_drawer": 3500}
 DEFAULT_STEPS_TO_LEARN = 4000
 

@@ -70,8 +70,7 @@ def test_fp16_export_halves_the_weights_and_keeps_the_statistics_exact(moved_che
     noise = torch.randn(1, 16, 10, generator=torch.Generator().manual_seed(0))
     a = full.predict_action_chunk(obs, initial_noise=noise).trajectory
     b = half.predict_action_chunk(obs, initial_noise=noise).trajectory
-    error = (a - b).abs().amax(dim=(0, 1))
-    assert float(error[:3].max()) < 2e-3 and float(error.max()) < 1e-2, error  # fp16 rounding of the weights only
+    assert float((a - b).abs().max()) < 5e-3  # metres / rotation units: fp16 rounding of the weights only
     assert json.loads((out / "record.json").read_text()) == {"success_rate": 0.0}
 
 

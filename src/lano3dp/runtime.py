@@ -35,7 +35,7 @@ import numpy as np
 import torch
 
 from lano3dp.errors import EmptyCloudError, Lano3dpError
-from lano3dp.geometry.frame import RGBDFrame, observe, resize_rgb  # noqa: F401 (observe: part of the API)
+from lano3dp.geometry.frame import RGBDFrame, observe, resize_rgb
 from lano3dp.guidance.checked import CheckConfig, checked_sample
 from lano3dp.guidance.costs import (
     Densified,

@@ -432,7 +432,7 @@ def record_episode(env, observer, seed: int, config: CollectConfig, expert: Call
             first_success = t if first_success is None else first_success
             last_success = t
         # after the first success an env's `terminated` only repeats it; a truncation still ends the episode
-        if first_success is None and (terminated or truncated) or truncated and first_success is not None:
+        if truncated or (terminated and first_success is None):
             break
         if first_success is not None and t - first_success >= follow_steps:
             break

@@ -104,10 +104,11 @@ class DiffusionPolicy(nn.Module):
     def fit_normalizer(self, dataset) -> None:
         """Fit the statistics on every step of a lano3dp.data.SequenceDataset's episodes (relative actions: on
         every offset a training window can hold)."""
-        actions = dataset.all_actions()
         if self.config.action_frame == "relative":
             actions = relative_action_rows(dataset.episode_arrays(dataset.action_key), dataset.episode_arrays("state"),
                                            self.config.n_obs_steps, self.config.horizon)
+        else:
+            actions = dataset.all_actions()
         data = {"action": actions, "state": dataset.all_obs("state")}
         if self.config.obs_type != "image":
             data[self.config.visual_key] = dataset.all_obs(self.config.visual_key)

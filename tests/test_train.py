@@ -18,7 +18,15 @@ from lano3dp.data import EpisodeStore
 from lano3dp.errors import CorruptFileError
 from lano3dp.policy import DiffusionPolicy, PolicyConfig
 from lano3dp.policy.checkpoint import load_training_state
-from lano3dp.train import TrainConfig, Trainer, TrainingConfigError, policy_config_for_dataset, train
+from lano3dp.train import (
+    TrainConfig,
+    Trainer,
+    TrainingConfigError,
+    cosine_with_warmup,
+    policy_config_for_dataset,
+    train,
+    training_progress,
+)
 
 ROT6D = np.array([1, 0, 0, 0, 1, 0], np.float32)
 # A model small enough that a step costs a few milliseconds: these tests check the machinery, not learning.
@@ -209,6 +217,42 @@ def test_a_killed_run_resumes_where_its_checkpoint_left_off(reach_data, tmp_path
     resumed_weights, unbroken_weights = load_training_state(final).model, load_training_state(unbroken).model
     for key, value in unbroken_weights.items():
         assert torch.allclose(resumed_weights[key], value, atol=1e-6), key
+
+
+def test_the_learning_rate_schedule_follows_whichever_ends_first_steps_or_cpu_budget():
+    # 1000 planned steps, 60 CPU-s budget: at step 100 with 30 CPU-s spent, the budget is half gone.
+    assert training_progress(100, 1000, 30.0, 1.0) == pytest.approx(0.5)
+    assert training_progress(800, 1000, 30.0, 1.0) == pytest.approx(0.8)  # steps ahead of the budget
+    assert training_progress(100, 1000, 30.0, None) == pytest.approx(0.1)  # no budget: steps alone
+    assert training_progress(100, 1000, 90.0, 1.0) == 1.0
+    assert cosine_with_warmup(0.0, 5, 10, 1000) == pytest.approx(0.5)  # warm-up counts steps
+    assert cosine_with_warmup(0.5, 500, 0, 1000) == pytest.approx(0.5)
+    assert cosine_with_warmup(1.0, 600, 0, 1000) == pytest.approx(0.0)
+
+
+def test_a_run_its_budget_stops_early_still_ends_with_the_learning_rate_decayed(reach_data, tmp_path):
+    """A probe that under-priced the steps (a machine that got busier) must not leave the final weights
+    trained at a high rate: the cosine follows the CPU budget and reaches 0 where the budget ends."""
+    config = micro_config(reach_data, tmp_path / "budget", steps=1_000_000, warmup_steps=5, cpu_minutes=2 / 60,
+                          ckpt_every=1_000_000, val_ratio=0.0, log_every=1)
+    trainer = Trainer(config)
+    rates = []
+    open_writer = trainer._writer
+
+    def recording_writer():  # the run logs the rate each step used
+        writer = open_writer()
+        log = writer.add_scalar
+        writer.add_scalar = lambda name, value, step: (rates.append(value) if name == "lr" else None,
+                                                       log(name, value, step))
+        return writer
+
+    trainer._writer = recording_writer
+    trainer.run()
+    assert trainer.stopped_by_budget and trainer.step < 0.01 * config.steps
+    assert max(rates) == pytest.approx(config.lr, rel=0.05), "the rate must reach its peak after warm-up"
+    assert rates[-1] < 0.05 * config.lr, f"last step at {rates[-1]:.2e}, not decayed"
+    middle = rates[len(rates) // 2]
+    assert 0.2 * config.lr < middle < 0.8 * config.lr, "half-way through the budget the cosine is half-way down"
 
 
 # ---- torchrun ------------------------------------------------------------------------------

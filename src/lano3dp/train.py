@@ -88,7 +88,8 @@ class TrainConfig:
         steps: total optimisation steps (a resumed run continues up to this number).
         batch_size: windows per step and per process (the global batch is batch_size x world size).
         lr, weight_decay, betas: AdamW; lr 5e-4 suits CPU-length runs (notes: cpu-cost.md sec. 7).
-        warmup_steps: linear warm-up before the cosine decay.
+        warmup_steps: linear warm-up before the cosine decay, which reaches 0 at the planned step count or,
+            under `cpu_minutes`, where the budget runs out if that comes first (training_progress).
         ema: keep an EMA of the weights (saved as the checkpoint's policy); ema_* is DP's schedule.
         val_ratio: fraction of episodes held out for the validation loss.
         val_every, ckpt_every, log_every: in steps; the last step always checkpoints.
@@ -227,6 +228,29 @@ def _step_shapes(store: EpisodeStore) -> dict[str, tuple[int, ...]]:
 _VALIDATION_STREAM = 2**31 - 1  # a "rank" no training process has: validation noise never repeats training noise
 
 
+def training_progress(step: int, steps: int, cpu_seconds: float, cpu_minutes: float | None) -> float:
+    """Fraction of a run done, in [0, 1]: of its planned steps, or of its CPU budget when that runs out first.
+
+    The step count of a budgeted run is planned from a timing probe; on a machine that gets busier the steps
+    cost more and the budget ends the run early. Scheduling by this fraction still decays the learning rate
+    to zero at the run's real end, instead of stopping it mid-cosine at a high rate.
+    """
+    done = step / steps
+    if cpu_minutes is not None:
+        done = max(done, cpu_seconds / (60.0 * cpu_minutes))
+    return min(done, 1.0)
+
+
+def cosine_with_warmup(progress: float, step: int, warmup_steps: int, steps: int) -> float:
+    """LR factor: linear warm-up over the first `warmup_steps` steps, then a half cosine to 0 at progress 1
+    (diffusers' get_cosine_schedule_with_warmup, with the progress given rather than derived from the step)."""
+    if step < warmup_steps:
+        return step / max(1, warmup_steps)
+    warmup_fraction = warmup_steps / steps
+    after_warmup = (progress - warmup_fraction) / max(1e-12, 1.0 - warmup_fraction)
+    return max(0.0, 0.5 * (1.0 + math.cos(math.pi * min(max(after_warmup, 0.0), 1.0))))
+
+
 def _noise_seed(seed: int, rank: int, step: int) -> int:
     return int(np.random.SeedSequence([seed, rank, step]).generate_state(1, dtype=np.uint64)[0] >> 1)
 
@@ -295,13 +319,12 @@ class Trainer:
             self._load_weights(self.policy, state.model, state.path)
         self.optimizer = torch.optim.AdamW(self.policy.parameters(), lr=config.lr, betas=config.betas,
                                            weight_decay=config.weight_decay, fused=True)
-        from diffusers.optimization import get_cosine_schedule_with_warmup
-
-        self.lr_scheduler = get_cosine_schedule_with_warmup(self.optimizer, config.warmup_steps, config.steps)
-        self.ema = EMA(self.policy, config.ema_inv_gamma, config.ema_power, max_value=config.ema_max) \
-            if config.ema else None
         self.step = 0
         self.cpu_seconds = 0.0  # spent on this run by all its sessions (restored on resume)
+        # diffusers' cosine schedule counts steps only; this one follows the CPU budget too (training_progress).
+        self.lr_scheduler = torch.optim.lr_scheduler.LambdaLR(self.optimizer, lambda _: self.lr_factor())
+        self.ema = EMA(self.policy, config.ema_inv_gamma, config.ema_power, max_value=config.ema_max) \
+            if config.ema else None
         self.stopped_by_budget = False
         if state is not None:
             self._restore(state, resume_from)
@@ -476,13 +499,13 @@ class Trainer:
                     loss.backward()
                     lr = self.optimizer.param_groups[0]["lr"]  # the rate this step used
                     self.optimizer.step()
-                    self.lr_scheduler.step()
                     if self.ema is not None:
                         self.ema.update(self.policy)
                     self.step += 1
                     self.cpu_seconds = time.process_time() - session_start
                     if config.cpu_minutes is not None:
                         self._agree_on_budget()
+                    self.lr_scheduler.step()
                     last_step = self._finished()
                     value = float(loss.detach())
                     if not math.isfinite(value):
@@ -515,17 +538,21 @@ class Trainer:
         return last_checkpoint
 
     def _agree_on_budget(self) -> None:
-        """Stop every rank at the same step: each counts its own CPU time, the first to run out decides."""
-        spent = self.cpu_seconds >= 60 * self.config.cpu_minutes
+        """Every rank takes the largest CPU time of any rank: they then stop at the same step and, since the
+        learning rate follows the budget, step with the same rate."""
         if self.distributed:
             import torch.distributed as dist
 
-            flag = torch.tensor([float(spent)], device=self.device)
-            dist.all_reduce(flag, op=dist.ReduceOp.MAX)
-            spent = bool(flag.item())
-            if spent:  # the others may be a little under: make them agree
-                self.cpu_seconds = max(self.cpu_seconds, 60 * self.config.cpu_minutes)
-        self.stopped_by_budget = spent and self.step < self.config.steps
+            spent = torch.tensor([self.cpu_seconds], dtype=torch.float64, device=self.device)
+            dist.all_reduce(spent, op=dist.ReduceOp.MAX)
+            self.cpu_seconds = float(spent.item())
+        self.stopped_by_budget = self.cpu_seconds >= 60 * self.config.cpu_minutes and self.step < self.config.steps
+
+    def lr_factor(self) -> float:
+        """The learning rate's multiplier at the current step and CPU time (cosine_with_warmup)."""
+        config = self.config
+        progress = training_progress(self.step, config.steps, self.cpu_seconds, config.cpu_minutes)
+        return cosine_with_warmup(progress, self.step, config.warmup_steps, config.steps)
 
     def _finished(self) -> bool:
         """The planned step count is reached, or the CPU budget is spent."""

@@ -56,6 +56,9 @@ RECIPES = {
     "relative": {"points": 64, "policy": {"action_frame": "relative"}},
     # ... seeing two observation steps: how fast the hand moves, where one frame is the same while holding
     "relative_to2": {"points": 64, "policy": {"action_frame": "relative", "n_obs_steps": 2}},
+    # the compact policy given each cloud's centroid and principal axis (PolicyConfig.object_pose_features): the
+    # grasp yaw of the phone and the broom was 40-90 degrees off with the point MLP alone
+    "pose": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True}},
     "previous": {"points": 128, "policy": dict(action_frame="absolute", n_obs_steps=2, down_dims=(64, 128, 256),
                                                point_hidden_dims=(64, 128, 256), diffusion_step_embed_dim=128)},
 }

@@ -403,3 +403,51 @@ def test_a_config_written_before_action_frame_existed_reads_as_absolute():
     assert PolicyConfig.from_dict(data).action_frame == "absolute"
     with pytest.raises(ValueError, match="action_frame must be one of"):
         tiny_config(action_frame="delta")
+
+
+def _slab(yaw: float, centre=(0.4, -0.1, 0.01)) -> torch.Tensor:
+    """Points (a 1 cm grid) of a 13 x 6 x 2 cm slab (the phone) lying at `yaw` rad."""
+    axes = [np.linspace(-0.065, 0.065, 14), np.linspace(-0.03, 0.03, 7), np.linspace(-0.01, 0.01, 3)]
+    local = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
+    c, s = np.cos(yaw), np.sin(yaw)
+    rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return torch.tensor(local @ rotation.T + np.asarray(centre), dtype=torch.float32)
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.4, 1.2, -1.0, 2.9])
+def test_pose_features_give_the_centroid_and_the_axis_of_a_slab_as_a_doubled_angle(yaw):
+    features = ObjectCloudsEncoder.pose_features(_slab(yaw)[None])[0].numpy()
+    assert np.allclose(features[:3], [0.4, -0.1, 0.01], atol=1e-5)
+    var_x, var_y = np.linspace(-0.065, 0.065, 14).var(), np.linspace(-0.03, 0.03, 7).var()
+    elongation = (var_x - var_y) / (var_x + var_y)  # 0.6 for this grid
+    assert np.allclose(features[3:], elongation * np.array([np.cos(2 * yaw), np.sin(2 * yaw)]), atol=1e-4)
+    # the slab turned half a turn is the same cloud: the same features
+    turned = ObjectCloudsEncoder.pose_features(_slab(yaw + np.pi)[None])[0].numpy()
+    assert np.allclose(features, turned, atol=1e-5)
+
+
+def test_pose_features_of_a_round_object_carry_no_angle():
+    rng = np.random.default_rng(0)
+    angle, radius = rng.uniform(0, 2 * np.pi, 2000), 0.05 * np.sqrt(rng.uniform(0, 1, 2000))
+    disc = np.stack([radius * np.cos(angle), radius * np.sin(angle), rng.uniform(0, 0.04, 2000)], -1)
+    features = ObjectCloudsEncoder.pose_features(torch.tensor(disc, dtype=torch.float32)[None])[0]
+    assert float(features[3:].norm()) < 0.05
+
+
+def test_a_policy_with_pose_features_sees_the_yaw_and_round_trips_as_format_three(tmp_path):
+    from safetensors import safe_open
+
+    policy = make_policy(seed=3, object_pose_features=True, n_obs_steps=1)
+    plain = make_policy(seed=3, n_obs_steps=1)
+    assert policy.obs_encoder.out_dim == plain.obs_encoder.out_dim + 2 * ObjectCloudsEncoder.POSE_DIM
+    obs = random_obs(policy.config, batch=1)
+    before = policy.predict_action_chunk(obs, generator=torch.Generator().manual_seed(2)).trajectory
+    policy.save_pretrained(tmp_path / "ckpt")
+    with safe_open(str(tmp_path / "ckpt" / "model.safetensors"), framework="pt") as handle:
+        assert handle.metadata()["format_version"] == "3"
+    loaded = DiffusionPolicy.from_pretrained(tmp_path / "ckpt")
+    assert loaded.config.object_pose_features
+    assert torch.equal(loaded.predict_action_chunk(obs, generator=torch.Generator().manual_seed(2)).trajectory, before)
+    data = tiny_config().to_dict()
+    del data["object_pose_features"]  # a config written before the field existed has none
+    assert PolicyConfig.from_dict(data).object_pose_features is False

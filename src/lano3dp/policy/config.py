@@ -64,6 +64,9 @@ class PolicyConfig:
             policy converts both ways itself, so its inputs and outputs are world-frame either way. Relative
             positions did not help where absolute ones reached 94-96%, and were worse on the grasp-and-carry
             tasks (results/learning.md), so absolute stays the default.
+        object_pose_features: give the UNet, beside each object cloud's learned feature, the cloud's centroid
+            and its horizontal principal axis (ObjectCloudsEncoder.pose_features): the yaw an object lies at
+            decides the grasp, and a point MLP learned it poorly from 40 demonstrations (objects only).
     """
 
     obs_type: str = "objects"
@@ -91,6 +94,7 @@ class PolicyConfig:
     inference_scheduler: str = "ddim"
     num_inference_steps: int | None = 10
     action_frame: str = "absolute"
+    object_pose_features: bool = False
     extra: dict[str, Any] = field(default_factory=dict)  # free-form notes (dataset, skill), not used by the model
 
     def __post_init__(self):
@@ -166,8 +170,9 @@ class PolicyConfig:
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"PolicyConfig: unknown fields {unknown}")
-        # configs written before action_frame existed predicted world positions, whatever today's default is
-        return cls(**({"action_frame": "absolute"} | data))
+        # configs written before these fields existed predicted world positions without pose features,
+        # whatever today's defaults are
+        return cls(**({"action_frame": "absolute", "object_pose_features": False} | data))
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2, sort_keys=True)

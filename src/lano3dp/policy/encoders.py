@@ -86,18 +86,40 @@ class ObjectCloudsEncoder(nn.Module):
     and "the pan" are different inputs even though they share the point encoder.
     """
 
+    POSE_DIM = 5  # centroid (3) + principal-axis pair (2), see pose_features
+
     def __init__(self, config: PolicyConfig):
         super().__init__()
         self.n_slots = config.n_slots
         self.point_encoder = make_point_encoder(config)
-        self.out_dim = config.n_slots * config.encoder_out
+        self.with_pose = config.object_pose_features
+        self.out_dim = config.n_slots * (config.encoder_out + (self.POSE_DIM if self.with_pose else 0))
+
+    @staticmethod
+    def pose_features(clouds: torch.Tensor) -> torch.Tensor:
+        """clouds (M, N, 3) -> (M, 5): the centroid, and the horizontal principal axis as e * (cos 2a, sin 2a).
+
+        a is the axis' angle and e = (l1 - l2) / (l1 + l2) its elongation from the xy covariance's eigenvalues,
+        both read off the covariance in closed form: (s_xx - s_yy, 2 s_xy) / (s_xx + s_yy). The doubled angle
+        makes an axis and its reverse one value (a slab at yaw a and a + pi is the same cloud), and a round
+        object gives ~0 rather than a noisy angle. Units are those of the clouds (normalised in the policy).
+        """
+        centroid = clouds.mean(dim=-2)
+        centred = clouds[..., :2] - centroid[..., None, :2]
+        s_xx, s_yy = centred[..., 0].square().mean(-1), centred[..., 1].square().mean(-1)
+        s_xy = (centred[..., 0] * centred[..., 1]).mean(-1)
+        spread = (s_xx + s_yy).clamp_min(1e-8)
+        return torch.cat([centroid, torch.stack([(s_xx - s_yy) / spread, 2 * s_xy / spread], dim=-1)], dim=-1)
 
     def forward(self, clouds: torch.Tensor) -> torch.Tensor:
         if clouds.ndim != 4 or clouds.shape[1] != self.n_slots or clouds.shape[-1] != 3:
             raise ValueError(f"object_clouds must be (batch, {self.n_slots} slots, points, 3), "
                              f"got {tuple(clouds.shape)}")
         m, k, n, _ = clouds.shape
-        features = self.point_encoder(clouds.reshape(m * k, n, 3))
+        flat = clouds.reshape(m * k, n, 3)
+        features = self.point_encoder(flat)
+        if self.with_pose:
+            features = torch.cat([features, self.pose_features(flat)], dim=-1)
         return features.reshape(m, k * features.shape[-1])
 
 

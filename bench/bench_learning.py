@@ -59,6 +59,10 @@ RECIPES = {
     # the compact policy given each cloud's centroid and principal axis (PolicyConfig.object_pose_features): the
     # grasp yaw of the phone and the broom was 40-90 degrees off with the point MLP alone
     "pose": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True}},
+    # ... trained on windows moved by one small rigid planar motion each (lano3dp.augment's defaults: 2 cm,
+    # 5 degrees, 2 mm jitter, 10% point dropout), clouds, state and actions alike
+    "pose_augment": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
+                     "train": {"augment": {}}},
     "previous": {"points": 128, "policy": dict(action_frame="absolute", n_obs_steps=2, down_dims=(64, 128, 256),
                                                point_hidden_dims=(64, 128, 256), diffusion_step_embed_dim=128)},
 }
@@ -96,7 +100,8 @@ def run_cell(args, task: str, recipe: str, seed: int, log) -> None:
     run = args.work / "runs" / f"{task}_{recipe}_seed{seed}"
     policy = policy_config_for_dataset(data, **settings["policy"])
     train_stage(data, run, policy_config=policy, minutes=args.minutes, n_checkpoints=args.checkpoints,
-                batch_size=args.batch_size, lr=args.lr, seed=seed, threads=args.threads, progress=False, log=log)
+                batch_size=args.batch_size, lr=args.lr, seed=seed, threads=args.threads, progress=False, log=log,
+                **settings.get("train", {}))
     checkpoints = list_checkpoints(run / "checkpoints")
     for index, (step, folder) in enumerate(checkpoints):
         final = index == len(checkpoints) - 1

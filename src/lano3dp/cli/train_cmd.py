@@ -39,8 +39,8 @@ def train_command(
     lr: float = typer.Option(5e-4, help="AdamW peak learning rate (5e-4 suits CPU-length runs)."),
     warmup_steps: int = typer.Option(500, "--warmup-steps", help="Linear warm-up steps before the cosine decay."),
     minutes: float | None = typer.Option(None, help="Stop, checkpointed, after this many CPU-minutes of this "
-                                                    "process (resumes included); --steps still sizes the LR "
-                                                    "schedule."),
+                                                    "process (resumes included); the LR's cosine ends where "
+                                                    "this budget or --steps does, whichever comes first."),
     size: Size = typer.Option(Size.compact, help="UNet widths: compact (48,96,192), small (64,128,256), "
                                                  "medium (128,256,512), dp (256,512,1024)."),
     obs_type: ObsType = typer.Option(ObsType.objects, "--obs-type",
@@ -48,6 +48,9 @@ def train_command(
     encoder: Encoder = typer.Option(Encoder.residual, help="Point encoder: residual (paper's best) or mlp (DP3)."),
     n_points: int | None = typer.Option(None, "--n-points", help="Points per object cloud to train on (default: "
                                                                  "all the dataset holds; fewer trains faster)."),
+    pose_features: bool = typer.Option(False, "--pose-features/--no-pose-features",
+                                       help="Give the policy each object cloud's centroid and horizontal principal "
+                                            "axis beside its learned feature (objects only)."),
     horizon: int = typer.Option(16, help="Predicted trajectory length H."),
     n_obs_steps: int = typer.Option(1, "--n-obs-steps", help="Observation steps To the policy sees."),
     n_action_steps: int = typer.Option(8, "--n-action-steps", help="Actions Ta executed per chunk."),
@@ -81,6 +84,8 @@ def train_command(
     # errors past here (a dataset that does not fit, a refused resume) are one line via the CLI's error boundary
     overrides = dict(obs_type=obs_type.value, point_encoder=encoder.value, down_dims=down_dims_for(size.value),
                      horizon=horizon, n_obs_steps=n_obs_steps, n_action_steps=n_action_steps)
+    if pose_features:
+        overrides["object_pose_features"] = True
     if n_points is not None:
         overrides["n_points"] = n_points
     policy = policy_config_for_dataset(data, **overrides)

@@ -9,6 +9,8 @@ protocol (`lano3dp.sim.protocol`): `reset(seed, options) -> (obs, info)` and
                      the policy's visual input (object clouds / scene cloud / 96x96 RGB), turns obstacle
                      phrases into guidance costs, samples a chunk and hands out its n_action_steps
                      actions one by one before re-planning (receding horizon, as Diffusion Policy).
+                     A policy trained with a time stride S (PolicyConfig.time_stride) observes and acts every
+                     S env steps and each of its actions spans S env steps (`interpolate_action`).
     rollout          runs one episode with a runner and measures it (success, obstacle contacts, minimum
                      clearance, EE path length, latency per chunk).
 
@@ -36,6 +38,7 @@ import torch
 
 from lano3dp.errors import EmptyCloudError, Lano3dpError
 from lano3dp.geometry.frame import RGBDFrame, observe, resize_rgb
+from lano3dp.geometry.rotations import quat_to_rot6d, rot6d_to_quat, slerp
 from lano3dp.guidance.checked import CheckConfig, checked_sample
 from lano3dp.guidance.costs import (
     Densified,
@@ -221,6 +224,23 @@ def scene_obstacles(frame: RGBDFrame) -> list[str]:
 _UNCHANGED = object()  # set_objects' "leave as is", since None means "nothing held"
 
 
+def interpolate_action(previous: np.ndarray, target: np.ndarray, steps: int) -> np.ndarray:
+    """(steps, 10) env actions from the `previous` commanded (10,) action to the (10,) `target`, the last one
+    `target` itself: position and gripper linearly, rotation by slerp (a policy action of a time-strided
+    policy spans `steps` env steps, so the env is led along it rather than told to jump)."""
+    target = np.asarray(target, dtype=np.float32)
+    if steps == 1:
+        return target[None]
+    previous = np.asarray(previous, dtype=np.float64)
+    fractions = np.arange(1, steps + 1, dtype=np.float64) / steps
+    actions = previous + fractions[:, None] * (target.astype(np.float64) - previous)
+    q0, q1 = rot6d_to_quat(previous[3:9]), rot6d_to_quat(target[3:9])
+    actions[:, 3:9] = quat_to_rot6d(np.stack([slerp(q0, q1, t) for t in fractions]))
+    actions = actions.astype(np.float32)
+    actions[-1] = target  # exactly what the policy asked for, not a round trip through quaternions
+    return actions
+
+
 class PolicyRunner:
     """Receding-horizon controller around a `DiffusionPolicy`.
 
@@ -247,6 +267,7 @@ class PolicyRunner:
         self.config = config or RuntimeConfig()
         pc = self.policy_config
         self.n_obs_steps = int(pc.n_obs_steps)
+        self.time_stride = pc.time_stride
         self.n_action_steps = int(self.config.n_action_steps or pc.n_action_steps)
         if self.n_action_steps > pc.horizon - pc.n_obs_steps + 1:
             raise ValueError(f"n_action_steps {self.n_action_steps} exceeds what one chunk holds "
@@ -265,6 +286,8 @@ class PolicyRunner:
         self.visual_fn = visual_fn or self._default_visual
         self.history: deque[dict[str, np.ndarray]] = deque(maxlen=self.n_obs_steps)
         self.queue: deque[np.ndarray] = deque()
+        self.env_actions: deque[np.ndarray] = deque()  # the env steps of the policy action being executed
+        self.commanded: np.ndarray | None = None  # the last action handed to the env
         self.chunks: list[ChunkRecord] = []
         self.obstacle_cost: PositionCost | None = None
         self.obstacles: ObstacleSet | None = None
@@ -284,6 +307,8 @@ class PolicyRunner:
         """Forget the window, the queued actions and the fitted obstacles; re-seed the sampling noise."""
         self.history.clear()
         self.queue.clear()
+        self.env_actions.clear()
+        self.commanded = None
         self.chunks = []
         self.obstacle_cost = None
         self.obstacles = None
@@ -528,12 +553,27 @@ class PolicyRunner:
         return record
 
     def act(self, frame: RGBDFrame, state: np.ndarray) -> np.ndarray:
-        """Observe, re-plan when the queue is empty, and return the next (10,) absolute EE action."""
-        self.push(frame, state)
-        if not self.queue:
-            self.plan()
+        """Observe, re-plan when the queue is empty, and return the next (10,) absolute EE action.
+
+        Call it every env step. With a time stride S it observes only every S-th env step, so the window holds
+        frames S env steps apart as the training windows held recorded steps, and each policy action becomes S
+        env actions interpolated from the last commanded one (`interpolate_action`).
+        """
+        if not self.env_actions:
+            self.push(frame, state)
+            if not self.queue:
+                self.plan()
+            target = self.queue.popleft()
+            if self.time_stride == 1:
+                self.env_actions.append(target)
+            else:
+                # at an episode's start nothing was commanded: lead from the EE's pose, the gripper as asked
+                previous = self.commanded if self.commanded is not None else np.concatenate(
+                    [np.asarray(state, dtype=np.float32)[:9], target[9:]])
+                self.env_actions.extend(interpolate_action(previous, target, self.time_stride))
         self.step_count += 1
-        return self.queue.popleft()
+        self.commanded = self.env_actions.popleft()
+        return self.commanded
 
 
 @dataclass

@@ -68,7 +68,10 @@ class NonFiniteLossError(Lano3dpError, FloatingPointError):
 # may change freely between sessions.
 RESUME_APPLIED_FIELDS = ("steps",)
 RESUME_FIXED_FIELDS = ("data", "batch_size", "lr", "weight_decay", "betas", "warmup_steps", "ema",
-                       "ema_inv_gamma", "ema_power", "ema_max", "val_ratio", "seed", "bf16", "augment")
+                       "ema_inv_gamma", "ema_power", "ema_max", "val_ratio", "seed", "bf16", "augment",
+                       "time_stride")
+# What a train_config.json written before a field existed was trained with (the field's default today).
+FIELDS_BEFORE = {"time_stride": 1}
 
 
 def changed_fields(old: dict[str, Any], new: dict[str, Any], names=None) -> list[str]:
@@ -105,6 +108,10 @@ class TrainConfig:
         bf16: bfloat16 autocast for the forward pass (CPU with AMX: about -19% step time for the small model).
         augment: lano3dp.augment.AugmentConfig (or its fields as a dict): a rigid planar motion of the whole
             window, point jitter and dropout; None trains on the demonstrations as recorded.
+        time_stride: recorded steps between consecutive steps of a training window, observations and actions
+            alike (1: every step). For an env recorded faster than a policy should plan: at 80 Hz, S = 4 makes a
+            16-step horizon span 0.8 s instead of 0.2 s. The checkpoint carries it (PolicyConfig.time_stride) and
+            the runtime then steps the env S times per policy action.
         progress: show a tqdm bar (rank 0).
     """
 
@@ -134,6 +141,7 @@ class TrainConfig:
     device: str = "cpu"
     bf16: bool = False
     augment: AugmentConfig | None = None
+    time_stride: int = 1
     progress: bool = True
     extra: dict[str, Any] = field(default_factory=dict)
 
@@ -153,6 +161,9 @@ class TrainConfig:
             raise ValueError(f"TrainConfig: val_ratio must be in [0, 1), got {self.val_ratio}")
         if self.cpu_minutes is not None and self.cpu_minutes <= 0:
             raise ValueError(f"TrainConfig: cpu_minutes must be > 0, got {self.cpu_minutes}")
+        if isinstance(self.time_stride, bool) or int(self.time_stride) != self.time_stride or self.time_stride < 1:
+            raise ValueError(f"TrainConfig: time_stride must be an int >= 1, got {self.time_stride!r}")
+        self.time_stride = int(self.time_stride)
         if self.lr <= 0 or len(self.betas) != 2:
             raise ValueError("TrainConfig: lr must be > 0 and betas a pair")
 
@@ -209,6 +220,18 @@ def policy_config_for_dataset(data: str | Path, **overrides) -> PolicyConfig:
     # How the observations were made travels with the policy, so a checkpoint acts without its dataset.
     fields["extra"]["observation"] = observation_settings(store.attrs)
     return PolicyConfig(**(fields | overrides))
+
+
+def with_time_stride(policy: PolicyConfig, stride: int) -> PolicyConfig:
+    """`policy` with its extra["observation"] carrying the time stride, so evaluation and `run` step the env as
+    training strode through the data. Stride 1 adds nothing: a stride-1 checkpoint is what it was before."""
+    if policy.time_stride == stride:
+        return policy
+    if "time_stride" in (policy.extra.get("observation") or {}):
+        raise TrainingConfigError(f"the policy configuration says time_stride {policy.time_stride}, the training "
+                                  f"configuration {stride}; give one stride")
+    observation = {**(policy.extra.get("observation") or {}), "time_stride": stride}
+    return policy.replace(extra={**policy.extra, "observation": observation})
 
 
 def load_training_state_step(checkpoint: Path) -> int | str:
@@ -301,7 +324,8 @@ class Trainer:
         self._check_dataset(store, policy_config)
         train_episodes, val_episodes = split_episodes(store.n_episodes, config.val_ratio, config.seed)
         window = dict(obs_keys=policy_config.obs_keys, n_obs_steps=policy_config.n_obs_steps,
-                      horizon=policy_config.horizon, n_action_steps=policy_config.n_action_steps)
+                      horizon=policy_config.horizon, n_action_steps=policy_config.n_action_steps,
+                      time_stride=policy_config.time_stride)
         self.train_set = SequenceDataset(store, episodes=train_episodes, **window)
         self.val_set = SequenceDataset(store, episodes=val_episodes, **window) if len(val_episodes) else None
         self.steps_per_epoch = len(self.train_set) // (config.batch_size * self.world_size)
@@ -355,15 +379,25 @@ class Trainer:
 
     def _policy_config(self, resume_from: Path | None) -> PolicyConfig:
         requested = self.config.policy
+        if requested is not None:
+            # train_config.json then holds the policy as trained, stride included
+            requested = self.config.policy = with_time_stride(requested, self.config.time_stride)
         if resume_from is not None:
             saved = load_config(resume_from / "config.json")
+            if saved.time_stride != self.config.time_stride:  # named as the other fixed fields are
+                raise TrainingConfigError(
+                    f"{self.out} was trained to step {load_training_state_step(resume_from)} with other settings "
+                    f"than this resume asks for (time_stride: {saved.time_stride!r} -> {self.config.time_stride!r}); "
+                    "resume with the old values or train into a new --out folder")
             if requested is not None and requested != saved:
                 differences = changed_fields(saved.to_dict(), requested.to_dict())
                 raise TrainingConfigError(
                     f"{self.out} holds a run with another policy configuration ({resume_from / 'config.json'}): "
                     f"{'; '.join(differences)}; resume it with the same settings or train into a new --out folder")
             return saved
-        return requested if requested is not None else policy_config_for_dataset(self.config.data)
+        if requested is None:
+            requested = with_time_stride(policy_config_for_dataset(self.config.data), self.config.time_stride)
+        return requested
 
     def _check_resume_settings(self, resume_from: Path) -> None:
         """Refuse to resume with another optimizer, schedule, data or seed, naming each changed field."""
@@ -374,6 +408,7 @@ class Trainer:
             saved = json.loads(saved_path.read_text())
         except (ValueError, UnicodeDecodeError) as error:
             raise CorruptFileError(saved_path, f"not valid JSON ({error})") from error
+        saved = {**FIELDS_BEFORE, **saved}
         new = self.config.to_dict()
         for config in (saved, new):  # the same dataset under another spelling of its path is the same dataset
             if config.get("data"):

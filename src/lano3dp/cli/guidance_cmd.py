@@ -11,15 +11,16 @@ def register(app: typer.Typer) -> None:
     app.command("guidance-figures")(guidance_figures)
 
 
-def _obs_window(store, episode: int, step: int, keys, n_obs_steps: int, batch: int) -> dict:
-    """The observation window ending at `step` of `episode`, edge-padded like training, repeated `batch` times."""
+def _obs_window(store, episode: int, step: int, keys, n_obs_steps: int, batch: int, stride: int = 1) -> dict:
+    """The observation window ending at `step` of `episode`, its steps `stride` recorded steps apart and
+    edge-padded like training, repeated `batch` times."""
     import numpy as np
 
     data = store.get_episode(episode, keys)
     length = len(next(iter(data.values())))
     if not 0 <= step < length:
         raise typer.BadParameter(f"step {step} is outside episode {episode} (length {length})")
-    rows = np.clip(np.arange(step - n_obs_steps + 1, step + 1), 0, length - 1)
+    rows = np.clip(step - stride * np.arange(n_obs_steps - 1, -1, -1), 0, length - 1)
     return {key: np.repeat(value[rows][None], batch, axis=0) for key, value in data.items()}
 
 
@@ -104,7 +105,8 @@ def _policy_sampler(checkpoint, data, episode, step, scheduler, steps, samples):
 
     policy = DiffusionPolicy.from_pretrained(checkpoint)
     store = EpisodeStore.open(data)
-    obs = _obs_window(store, episode, step, policy.config.obs_keys, policy.config.n_obs_steps, samples)
+    obs = _obs_window(store, episode, step, policy.config.obs_keys, policy.config.n_obs_steps, samples,
+                      policy.config.time_stride)
 
     def to_metric(trajectory):
         return policy.unnormalize_actions(trajectory, obs["state"])[..., :3]

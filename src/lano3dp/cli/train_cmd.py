@@ -54,6 +54,11 @@ def train_command(
     horizon: int = typer.Option(16, help="Predicted trajectory length H."),
     n_obs_steps: int = typer.Option(1, "--n-obs-steps", help="Observation steps To the policy sees."),
     n_action_steps: int = typer.Option(8, "--n-action-steps", help="Actions Ta executed per chunk."),
+    time_stride: int = typer.Option(1, "--time-stride", min=1,
+                                    help="Recorded steps between consecutive policy steps, observations and "
+                                         "actions alike (for a fast env: at 80 Hz, 4 makes a 16-step horizon "
+                                         "span 0.8 s); the checkpoint keeps it and eval/run step the env that "
+                                         "many times per action."),
     seed: int = typer.Option(0, help="Seed of weights, data order and diffusion noise."),
     val_ratio: float = typer.Option(0.05, "--val-ratio", help="Fraction of episodes held out for validation."),
     val_every: int = typer.Option(500, "--val-every", help="Steps between validation losses."),
@@ -93,7 +98,7 @@ def train_command(
                          warmup_steps=warmup_steps, val_ratio=val_ratio, val_every=val_every,
                          ckpt_every=ckpt_every, seed=seed, device=device, threads=threads, cpu_minutes=minutes,
                          num_workers=num_workers, bf16=bf16, ema=ema, progress=progress,
-                         augment=AugmentConfig() if augment else None)
+                         augment=AugmentConfig() if augment else None, time_stride=time_stride)
     final = train(config)
     if int(os.environ.get("RANK", "0")) == 0:
         typer.echo(f"final checkpoint: {final}")

@@ -82,3 +82,16 @@ def quat_to_rot6d(quat):
 
 def rot6d_to_quat(rot6d) -> np.ndarray:
     return matrix_to_quat(rot6d_to_matrix(np.asarray(rot6d, dtype=np.float64)))
+
+
+def slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
+    """Spherical interpolation between unit quaternions (w, x, y, z), shortest arc."""
+    q0, q1 = np.asarray(q0, float), np.asarray(q1, float)
+    dot = float(np.dot(q0, q1))
+    if dot < 0:
+        q1, dot = -q1, -dot
+    if dot > 0.9995:
+        q = q0 + t * (q1 - q0)
+        return q / np.linalg.norm(q)
+    theta = np.arccos(dot)
+    return (np.sin((1 - t) * theta) * q0 + np.sin(t * theta) * q1) / np.sin(theta)

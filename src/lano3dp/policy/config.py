@@ -67,6 +67,9 @@ class PolicyConfig:
         object_pose_features: give the UNet, beside each object cloud's learned feature, the cloud's centroid
             and its horizontal principal axis (ObjectCloudsEncoder.pose_features): the yaw an object lies at
             decides the grasp, and a point MLP learned it poorly from 40 demonstrations (objects only).
+        extra: free-form notes the model does not use. extra["observation"] says how the training observations
+            were made (camera, crop box, points, control_hz and, when not 1, time_stride: recorded steps between
+            consecutive window steps; see `time_stride`), so a checkpoint acts without its dataset.
     """
 
     obs_type: str = "objects"
@@ -137,6 +140,9 @@ class PolicyConfig:
              "(each level but the last halves the time axis); pick another horizon or fewer levels")
         need(self.prediction_type == "epsilon",
              "prediction_type must be 'epsilon': the paper found sample prediction makes A_0|k guidance ineffective")
+        stride = (self.extra.get("observation") or {}).get("time_stride", 1)
+        need(isinstance(stride, int) and not isinstance(stride, bool) and stride >= 1,
+             f"extra['observation']['time_stride'] must be an int >= 1, got {stride!r}")
         if self.num_inference_steps is not None:
             need(1 <= self.num_inference_steps <= self.num_train_timesteps,
                  f"num_inference_steps must be in [1, {self.num_train_timesteps}], got {self.num_inference_steps}")
@@ -150,6 +156,12 @@ class PolicyConfig:
     @property
     def obs_keys(self) -> tuple[str, str]:
         return (self.visual_key, "state")
+
+    @property
+    def time_stride(self) -> int:
+        """Env steps one policy step spans: the recorded steps between consecutive steps of the training windows
+        (extra["observation"]["time_stride"]; 1, every recorded step, when absent)."""
+        return int((self.extra.get("observation") or {}).get("time_stride", 1))
 
     @property
     def n_slots(self) -> int:

@@ -21,23 +21,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lano3dp.geometry.rotations import slerp
 from lano3dp.sim.robot import mat_to_quat, quat_to_mat, rot6d
 
 CONTROL_HZ = 10.0
 OPEN, CLOSED = 0.0, 1.0
-
-
-def slerp(q0: np.ndarray, q1: np.ndarray, t: float) -> np.ndarray:
-    """Spherical interpolation between unit quaternions (w, x, y, z), shortest arc."""
-    q0, q1 = np.asarray(q0, float), np.asarray(q1, float)
-    dot = float(np.dot(q0, q1))
-    if dot < 0:
-        q1, dot = -q1, -dot
-    if dot > 0.9995:
-        q = q0 + t * (q1 - q0)
-        return q / np.linalg.norm(q)
-    theta = np.arccos(dot)
-    return (np.sin((1 - t) * theta) * q0 + np.sin(t * theta) * q1) / np.sin(theta)
 
 
 def rotation_angle(r0: np.ndarray, r1: np.ndarray) -> float:

@@ -448,6 +448,8 @@ def test_a_policy_with_pose_features_sees_the_yaw_and_round_trips_as_format_thre
     loaded = DiffusionPolicy.from_pretrained(tmp_path / "ckpt")
     assert loaded.config.object_pose_features
     assert torch.equal(loaded.predict_action_chunk(obs, generator=torch.Generator().manual_seed(2)).trajectory, before)
+    with pytest.raises(ValueError, match="object_pose_features needs obs_type 'objects'"):
+        tiny_config(obs_type="scene", object_pose_features=True)
     data = tiny_config().to_dict()
     del data["object_pose_features"]  # a config written before the field existed has none
     assert PolicyConfig.from_dict(data).object_pose_features is False

@@ -122,6 +122,8 @@ class PolicyConfig:
             need(len(self.object_names) >= 1, "obs_type 'objects' needs object_names (the slot order)")
             need(len(set(self.object_names)) == len(self.object_names),
                  f"object_names must be distinct, got {self.object_names}")
+        need(not self.object_pose_features or self.obs_type == "objects",
+             f"object_pose_features needs obs_type 'objects' (one cloud per object), got {self.obs_type!r}")
         for name in ("n_points", "scene_points", "image_size", "state_dim", "action_dim", "n_obs_steps", "horizon",
                      "n_action_steps", "diffusion_step_embed_dim", "kernel_size", "n_groups", "encoder_out",
                      "state_feature_dim", "num_train_timesteps"):

@@ -1,26 +1,61 @@
-"""Training-free, cost-guided sampling (the paper's Algorithm 1), obstacle costs and checked execution."""
+"""Training-free, cost-guided sampling (the paper's Algorithm 1), obstacle costs and checked execution.
 
-from lano3dp.guidance.checked import CheckConfig, CheckedResult, checked_sample
-from lano3dp.guidance.costs import (
-    Cylinder,
-    Densified,
-    MetricGradient,
-    Obstacle,
-    ObstacleSet,
-    OrientedBox,
-    PointCloudObstacle,
-    PositionCost,
-    Sphere,
-    SweptBody,
-    densify,
-    min_clearance,
-)
-from lano3dp.guidance.exceptions import CollisionError, GuidanceError
-from lano3dp.guidance.fitting import fit_box, fit_cylinder
-from lano3dp.guidance.sampler import DenoiseStep, GuidanceConfig, GuidanceMode, denoise
+Names are imported on first use (module __getattr__, as `lano3dp` itself does), so importing one light module
+of the package does not import torch.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+# public name -> module that defines it
+_EXPORTS = {
+    "CheckConfig": "checked", "CheckedResult": "checked", "checked_sample": "checked",
+    "Cylinder": "costs", "Densified": "costs", "MetricGradient": "costs", "Obstacle": "costs",
+    "ObstacleSet": "costs", "OrientedBox": "costs", "PointCloudObstacle": "costs", "PositionCost": "costs",
+    "Sphere": "costs", "SweptBody": "costs", "densify": "costs", "min_clearance": "costs",
+    "CollisionError": "exceptions", "GuidanceError": "exceptions",
+    "fit_box": "fitting", "fit_cylinder": "fitting",
+    "DenoiseStep": "sampler", "GuidanceConfig": "sampler", "GuidanceMode": "sampler", "denoise": "sampler",
+}
 
 __all__ = [
     "CheckConfig", "CheckedResult", "CollisionError", "Cylinder", "DenoiseStep", "Densified", "GuidanceConfig",
     "GuidanceError", "GuidanceMode", "MetricGradient", "Obstacle", "ObstacleSet", "OrientedBox", "PointCloudObstacle",
-    "PositionCost", "Sphere", "SweptBody", "checked_sample", "denoise", "densify", "fit_box", "fit_cylinder", "min_clearance",
+    "PositionCost", "Sphere", "SweptBody", "checked_sample", "denoise", "densify", "fit_box", "fit_cylinder",
+    "min_clearance",
 ]
+
+if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports on demand
+    from lano3dp.guidance.checked import CheckConfig, CheckedResult, checked_sample
+    from lano3dp.guidance.costs import (
+        Cylinder,
+        Densified,
+        MetricGradient,
+        Obstacle,
+        ObstacleSet,
+        OrientedBox,
+        PointCloudObstacle,
+        PositionCost,
+        Sphere,
+        SweptBody,
+        densify,
+        min_clearance,
+    )
+    from lano3dp.guidance.exceptions import CollisionError, GuidanceError
+    from lano3dp.guidance.fitting import fit_box, fit_cylinder
+    from lano3dp.guidance.sampler import DenoiseStep, GuidanceConfig, GuidanceMode, denoise
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value  # later look-ups skip __getattr__
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -35,23 +35,17 @@ def plot_top_view(path: str | Path, runs: Sequence[tuple[str, np.ndarray]], *,
     Args:
         path: PNG to write.
         runs: (label, (T, 3) EE positions in metres) per path; the start is a dot, the end a cross.
-        obstacles: `runtime.describe_obstacle` dicts; a cylinder is drawn filled (its fitted radius) with a dashed
-            circle at its safety distance Q* (held-object extent and margin included).
+        obstacles: `runtime.describe_obstacle` dicts, each drawn by its registered shape
+            (`guidance.shapes.draw_obstacle`): a cylinder filled (its fitted radius) with a dashed circle at its
+            safety distance Q* (held-object extent and margin included), a box as its footprint.
         objects: name -> (x, y[, z]) of labelled objects (e.g. target centroids).
     """
-    plt = _pyplot()
-    from matplotlib.patches import Circle, Polygon
+    from lano3dp.guidance.shapes import draw_obstacle
 
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(5.5, 5.0), dpi=120)
     for index, obstacle in enumerate(obstacles):
-        label = "obstacle (fitted)" if index == 0 else None
-        if "radius" in obstacle:
-            center = obstacle["center"][:2]
-            ax.add_patch(Circle(center, obstacle["radius"], color="tab:red", alpha=0.45, label=label))
-            ax.add_patch(Circle(center, obstacle["safety_distance"], fill=False, ls="--", color="tab:red",
-                                label="safety distance Q*" if index == 0 else None))
-        elif "corners" in obstacle:
-            ax.add_patch(Polygon(np.asarray(obstacle["corners"]), color="tab:red", alpha=0.45, label=label))
+        draw_obstacle(ax, obstacle, label="obstacle (fitted)" if index == 0 else None)
     for index, (label, positions) in enumerate(runs):
         positions = np.asarray(positions, dtype=np.float64)
         if positions.ndim != 2 or len(positions) == 0:

@@ -15,8 +15,9 @@ protocol (`lano3dp.sim.protocol`): `reset(seed, options) -> (obs, info)` and
                      clearance, EE path length, latency per chunk).
 
 Obstacles become costs as in the paper: segment the obstacle and fit a vertical cylinder to its points
-(`guidance.fitting.fit_cylinder`). What must keep clear of it is, by default, the swept body
-(`ObstacleModel.body="swept"`, `guidance.costs.SweptBody`): the hand as a row of balls along its finger
+(`guidance.fitting.fit_cylinder`; `ObstacleModel.shape` picks another shape registered in `guidance.shapes`).
+What must keep clear of it is, by default, the swept body (`ObstacleModel.body="swept"`,
+`guidance.costs.SweptBody`): the hand as a row of balls along its finger
 axis plus the held object as a ball at its fitted centre, re-measured before each chunk. The paper's
 model (`body="sphere"`) hinges the xy distance of every waypoint at Q* = obstacle radius + held-object
 extent + margin, the extent measured from the held object's cloud (the paper used the bowl's diameter).
@@ -44,15 +45,17 @@ from lano3dp.guidance.costs import (
     Densified,
     MetricGradient,
     ObstacleSet,
-    PointCloudObstacle,
     PositionCost,
     SweptBody,
 )
-from lano3dp.guidance.fitting import fit_box, fit_cylinder
+from lano3dp.guidance.fitting import fit_cylinder
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
+from lano3dp.guidance.shapes import BUILTIN_OBSTACLE_SHAPES, fit_obstacle, get_obstacle_shape
+from lano3dp.guidance.shapes import describe_obstacle as _describe_obstacle
 from lano3dp.perception.exceptions import PerceptionError, TooFewPointsError
 
-OBSTACLE_SHAPES = ("cylinder", "box", "points")
+# The built-in shapes (kept for code that imported it); `guidance.obstacle_shape_names()` lists every registered one.
+OBSTACLE_SHAPES = BUILTIN_OBSTACLE_SHAPES
 # Points enough for a first-frame target cloud that an obstacle mostly hides (FPS repeats them to N): its
 # centroid is still the object's, where failing the episode would be certain.
 FIRST_FRAME_MIN_POINTS = 3
@@ -69,8 +72,9 @@ class ObstacleModel:
     """How an obstacle's segmented points become a guidance cost.
 
     Attributes:
-        shape: "cylinder" (the paper: vertical cylinder, xy hinge), "box" (yaw-oriented box) or
-            "points" (nearest segmented point).
+        shape: a registered obstacle shape (`guidance.shapes`): "cylinder" (the paper: vertical cylinder, xy
+            hinge), "box" (yaw-oriented box), "points" (nearest segmented point), or one registered with
+            `guidance.register_obstacle_shape`.
         margin: metres beyond contact at which the cost starts pushing (part of Q*).
         body: what must stay clear. "swept" (default, beyond the paper): the hand as a row of balls along the
             EE's finger axis, plus, while the state's grasp flag is set, the held object as a ball at its fitted
@@ -101,8 +105,7 @@ class ObstacleModel:
     refit_every_chunk: bool = False
 
     def __post_init__(self):
-        if self.shape not in OBSTACLE_SHAPES:
-            raise ValueError(f"obstacle shape must be one of {OBSTACLE_SHAPES}, got {self.shape!r}")
+        get_obstacle_shape(self.shape)  # an unknown name fails here, naming the registered ones
         if self.body not in BODY_MODELS:
             raise ValueError(f"obstacle body model must be one of {BODY_MODELS}, got {self.body!r}")
         if self.body == "swept" and self.held_radius is not None:
@@ -126,12 +129,9 @@ class ObstacleModel:
         return along[:, None] * finger_axis, np.full(count, self.hand_radius)
 
     def fit(self, points: np.ndarray, held_radius: float) -> PositionCost:
-        """(N, 3) world-frame obstacle points -> a cost whose safety distance includes `held_radius` (m)."""
-        if self.shape == "cylinder":
-            return fit_cylinder(points, held_radius=held_radius, margin=self.margin, xy_only=self.xy_only)
-        if self.shape == "box":
-            return fit_box(points, held_radius=held_radius, margin=self.margin, xy_only=self.xy_only)
-        return PointCloudObstacle(points, held_radius=held_radius, margin=self.margin, xy_only=self.xy_only)
+        """(N, 3) world-frame obstacle points -> a cost whose safety distance includes `held_radius` (m), fitted
+        by the registered shape; EmptyCloudError when the points are too few for it."""
+        return fit_obstacle(self.shape, points, held_radius=held_radius, margin=self.margin, xy_only=self.xy_only)
 
 
 @dataclass(frozen=True)
@@ -635,18 +635,10 @@ class EpisodeResult:
         return data
 
 
-def describe_obstacle(obstacle) -> dict[str, Any]:
-    """A fitted obstacle as plain data (for JSON and plots): shape, centre, size and safety distance, metres."""
-    from lano3dp.guidance.costs import Cylinder, OrientedBox
-
-    data: dict[str, Any] = {"shape": type(obstacle).__name__, "repr": repr(obstacle)}
-    if isinstance(obstacle, Cylinder):
-        data.update(center=[round(float(c), 5) for c in obstacle.center], radius=round(obstacle.radius, 5),
-                    safety_distance=round(obstacle.safety_distance, 5))
-    elif isinstance(obstacle, OrientedBox):
-        data.update(center=[round(float(c), 5) for c in obstacle.center[:2]], corners=obstacle.corners_xy().tolist(),
-                    half_extents=[round(float(h), 5) for h in obstacle.half_extents])
-    return data
+def describe_obstacle(obstacle, shape: str | None = None) -> dict[str, Any]:
+    """A fitted obstacle as plain data (for JSON and plots): cost class, centre, size and safety distance (m), the
+    registered shape that fitted it and a one-line description (`guidance.shapes.describe_obstacle`)."""
+    return _describe_obstacle(obstacle, shape)
 
 
 def path_length(positions: np.ndarray) -> float:
@@ -729,7 +721,8 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
         chunk_predicted_clearance=[None if c.predicted_clearance is None else round(c.predicted_clearance, 5)
                                    for c in runner.chunks],
         ee_path=ee_path,
-        obstacles=[describe_obstacle(o) for o in runner.obstacles] if runner.obstacles is not None else [],
+        obstacles=([describe_obstacle(o, runner.config.obstacle.shape) for o in runner.obstacles]
+                   if runner.obstacles is not None else []),
         held_radius=runner.held_radius, held_clouds=runner.held_clouds, partly_hidden=list(runner.partly_hidden),
         targets=dict(runner.initial_targets), error=error,
         wall_s=time.perf_counter() - started,

@@ -1,7 +1,7 @@
 """Training-free, cost-guided sampling (the paper's Algorithm 1), obstacle costs and checked execution.
 
-Names are imported on first use (module __getattr__, as `lano3dp` itself does), so importing one light module
-of the package does not import torch.
+Names are imported on first use (module __getattr__, as `lano3dp` itself does), so the command line can read
+the obstacle-shape registry (`guidance.shapes`) for its --help without importing torch.
 """
 
 from __future__ import annotations
@@ -18,13 +18,16 @@ _EXPORTS = {
     "CollisionError": "exceptions", "GuidanceError": "exceptions",
     "fit_box": "fitting", "fit_cylinder": "fitting",
     "DenoiseStep": "sampler", "GuidanceConfig": "sampler", "GuidanceMode": "sampler", "denoise": "sampler",
+    "ObstacleShape": "shapes", "UnknownObstacleShapeError": "shapes", "get_obstacle_shape": "shapes",
+    "obstacle_shape_names": "shapes", "register_obstacle_shape": "shapes", "unregister_obstacle_shape": "shapes",
 }
 
 __all__ = [
     "CheckConfig", "CheckedResult", "CollisionError", "Cylinder", "DenoiseStep", "Densified", "GuidanceConfig",
-    "GuidanceError", "GuidanceMode", "MetricGradient", "Obstacle", "ObstacleSet", "OrientedBox", "PointCloudObstacle",
-    "PositionCost", "Sphere", "SweptBody", "checked_sample", "denoise", "densify", "fit_box", "fit_cylinder",
-    "min_clearance",
+    "GuidanceError", "GuidanceMode", "MetricGradient", "Obstacle", "ObstacleSet", "ObstacleShape", "OrientedBox",
+    "PointCloudObstacle", "PositionCost", "Sphere", "SweptBody", "UnknownObstacleShapeError", "checked_sample",
+    "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "min_clearance", "obstacle_shape_names",
+    "register_obstacle_shape", "unregister_obstacle_shape",
 ]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports on demand
@@ -46,6 +49,14 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
     from lano3dp.guidance.exceptions import CollisionError, GuidanceError
     from lano3dp.guidance.fitting import fit_box, fit_cylinder
     from lano3dp.guidance.sampler import DenoiseStep, GuidanceConfig, GuidanceMode, denoise
+    from lano3dp.guidance.shapes import (
+        ObstacleShape,
+        UnknownObstacleShapeError,
+        get_obstacle_shape,
+        obstacle_shape_names,
+        register_obstacle_shape,
+        unregister_obstacle_shape,
+    )
 
 
 def __getattr__(name: str) -> Any:

@@ -83,6 +83,8 @@ class EvalConfig:
         guide_when_needed: guide a chunk only when the policy's own one comes within the margin of an obstacle.
         body: what guidance keeps clear: "swept" (hand and held object as balls re-measured every chunk) or
             "sphere" (the paper: one ball of held_radius round the EE point); see `runtime.ObstacleModel`.
+        obstacle_shape: the registered shape fitted to each obstacle's points: "cylinder" (the paper), "box",
+            "points", or one registered with `lano3dp.guidance.register_obstacle_shape` (see `guidance.shapes`).
         n_action_steps: actions executed per chunk (None: the policy's).
         max_steps: episode step limit (None: the task's).
         image_size: camera resolution (None: the dataset's).
@@ -134,6 +136,7 @@ class EvalConfig:
     obstacle_scenes_only: bool = False
     refit_obstacles: bool = False
     guide_when_needed: bool = False
+    obstacle_shape: str = "cylinder"
 
     def __post_init__(self):
         self.checkpoint = str(self.checkpoint)
@@ -150,6 +153,14 @@ class EvalConfig:
                              "a user's env picks its own scenes")
         if self.held_radius is not None and self.body != "sphere":
             raise ValueError("a fixed held radius sizes the 'sphere' body model; add body='sphere' (--body sphere)")
+        check_obstacle_shape(self.obstacle_shape)
+
+
+def check_obstacle_shape(name: str) -> None:
+    """An unknown shape fails before any episode, naming the registered ones."""
+    from lano3dp.guidance.shapes import get_obstacle_shape
+
+    get_obstacle_shape(name)
 
 
 def env_spec(env) -> str | None:
@@ -264,8 +275,8 @@ def runtime_config(config: EvalConfig, seed: int):
     return RuntimeConfig(
         guidance=guidance_config(config), scheduler=config.scheduler, num_inference_steps=config.steps,
         n_action_steps=config.n_action_steps,
-        obstacle=ObstacleModel(margin=config.margin, body=config.body, held_radius=config.held_radius,
-                               refit_every_chunk=config.refit_obstacles),
+        obstacle=ObstacleModel(shape=config.obstacle_shape, margin=config.margin, body=config.body,
+                               held_radius=config.held_radius, refit_every_chunk=config.refit_obstacles),
         checked=CheckConfig(initial_scale=max(config.rho, 1e-3), densify=config.densify) if config.checked else None,
         metric_gradient=config.metric_gradient, densify=config.densify, guide_when_needed=config.guide_when_needed,
         seed=seed)
@@ -355,13 +366,17 @@ _WORKER: EpisodeRunner | None = None
 _WORKER_ERROR: BaseException | None = None
 
 
-def _worker_init(config_dict: dict[str, Any]) -> None:
+def _worker_init(config_dict: dict[str, Any], shapes: dict[str, Any] | None = None) -> None:
     global _WORKER, _WORKER_ERROR
     os.environ["OMP_NUM_THREADS"] = "1"
     import torch
 
     torch.set_num_threads(1)
     try:
+        from lano3dp.guidance.shapes import register_obstacle_shape
+
+        for name, shape in (shapes or {}).items():  # a spawned process has only the built-in shapes
+            register_obstacle_shape(name, shape, replace=True)
         _WORKER = EpisodeRunner(EvalConfig(**config_dict))
     except Exception as error:  # a Pool re-spawns workers whose initializer raises, forever: report it per job
         _WORKER_ERROR = error
@@ -372,6 +387,24 @@ def _worker_run(job: tuple[int, int, str | None]) -> tuple[int, dict[str, Any]]:
         raise _WORKER_ERROR
     index, seed, video = job
     return index, _WORKER.run(seed, video)
+
+
+def shapes_for_workers(name: str) -> dict[str, Any]:
+    """{name: shape} for a shape registered in this process and not built in, checked to pickle, as spawned
+    worker processes start with the built-in shapes alone; {} for a built-in one."""
+    import pickle
+
+    from lano3dp.guidance.shapes import BUILTIN_OBSTACLE_SHAPES, get_obstacle_shape
+
+    if name in BUILTIN_OBSTACLE_SHAPES:
+        return {}
+    shape = get_obstacle_shape(name)
+    try:
+        pickle.dumps(shape)
+    except Exception as error:
+        raise ValueError(f"obstacle shape {name!r} cannot be sent to worker processes ({error}); define its class "
+                         "at the top level of an importable module, or evaluate with workers=1") from None
+    return {name: shape}
 
 
 # ---- the whole evaluation ------------------------------------------------------------------------
@@ -617,7 +650,8 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
             runner.close()
     elif jobs:
         context = mp.get_context("spawn")
-        with context.Pool(workers, initializer=_worker_init, initargs=(asdict(config),)) as pool:
+        with context.Pool(workers, initializer=_worker_init,
+                          initargs=(asdict(config), shapes_for_workers(config.obstacle_shape))) as pool:
             for index, record in pool.imap_unordered(_worker_run, jobs):
                 finished(index, record)
     episodes = [records[index] for index in sorted(records)]
@@ -681,7 +715,8 @@ class RunConfig:
         task: simulator task, or the task `env`'s factory gets (default: the plan's skill, whose registry name
             is the task name).
         variation: scene variation (default: "obstacle" when the plan names obstacles, else "clean").
-        guidance, rho, last_steps, per_train_step, metric_gradient, scheduler, steps, checked, margin: as EvalConfig.
+        guidance, rho, last_steps, per_train_step, metric_gradient, scheduler, steps, checked, margin,
+            obstacle_shape: as EvalConfig.
         segmenter, detector, detector_dir, sam_dir: the perception of targets and obstacles, as EvalConfig.
         compare: also run the same scene without guidance, for the plot.
         seed: scene seed.
@@ -715,10 +750,12 @@ class RunConfig:
     detector_dir: str | None = None
     sam_dir: str | None = None
     env: str | None = None
+    obstacle_shape: str = "cylinder"
 
     def __post_init__(self):
         check_segmenter_choice(self.segmenter)
         self.env = env_spec(self.env)
+        check_obstacle_shape(self.obstacle_shape)
 
 
 def ground_obstacles(frame, phrases: Sequence[str]) -> tuple[list[str], list[str]]:
@@ -830,7 +867,8 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
         eval_config = EvalConfig(checkpoint=str(checkpoint), guidance=mode, rho=config.rho,
                                  last_steps=config.last_steps, per_train_step=config.per_train_step,
                                  metric_gradient=config.metric_gradient, scheduler=config.scheduler, steps=config.steps,
-                                 checked=config.checked, margin=config.margin, segmenter=config.segmenter,
+                                 checked=config.checked, margin=config.margin,
+                                 obstacle_shape=config.obstacle_shape, segmenter=config.segmenter,
                                  detector=config.detector, detector_dir=config.detector_dir, sam_dir=config.sam_dir)
         runner = PolicyRunner(policy, observer, runtime_config(eval_config, seed), target_phrases=targets,
                               obstacle_phrases=obstacles, held_object=held)

@@ -474,6 +474,19 @@ EVAL_FIELDS_BEFORE = {"body": "sphere"}
 EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
 
 
+def saved_config(made: dict[str, Any]) -> dict[str, Any]:
+    """A saved EvalConfig dict (results JSON, episode log) with each measured field added since it was saved set
+    to what it was made with (EVAL_FIELDS_BEFORE, else the field's default), so adding a field to EvalConfig
+    keeps earlier results current and a killed evaluation's log resumable."""
+    from dataclasses import MISSING, fields
+
+    made = dict(made)
+    for field in fields(EvalConfig):
+        if field.name not in made and field.name not in EVAL_FIELDS_NOT_MEASURED and field.default is not MISSING:
+            made[field.name] = json.loads(json.dumps(EVAL_FIELDS_BEFORE.get(field.name, field.default)))
+    return made
+
+
 def episode_log_path(out: str | Path) -> Path:
     """The JSONL log beside a results JSON: results.json -> results.episodes.jsonl."""
     out = Path(out)
@@ -507,7 +520,10 @@ class EpisodeLog:
             header = json.loads(complete[0]) if complete else None
         except ValueError:
             header = None
-        if not header or header.get("format") != EPISODE_LOG_FORMAT or header.get("evaluation") != self.identity:
+        evaluation = header.get("evaluation") if isinstance(header, dict) else None
+        if isinstance(evaluation, dict) and isinstance(evaluation.get("config"), dict):
+            evaluation = {**evaluation, "config": saved_config(evaluation["config"])}
+        if not header or header.get("format") != EPISODE_LOG_FORMAT or evaluation != self.identity:
             self._start()  # another evaluation's log (or an empty one): this evaluation starts from nothing
             return
         for number, line in enumerate(complete[1:], 2):

@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import MISSING, asdict, fields
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -163,17 +163,14 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
 # ---- evaluate --------------------------------------------------------------------------------------
 def cached_eval(config) -> dict[str, Any] | None:
     """The results in `config.out` if they were made with this EvalConfig (up to the worker count), else None."""
-    from lano3dp.evaluate import EVAL_FIELDS_BEFORE
     from lano3dp.evaluate import EVAL_FIELDS_NOT_MEASURED as _EVAL_FIELDS_NOT_MEASURED
+    from lano3dp.evaluate import saved_config
 
     if config.out and Path(config.out).exists():
         previous = json.loads(Path(config.out).read_text())
         wanted = json.loads(json.dumps(asdict(config)))
-        made = dict(previous.get("config") or {})
         # results saved before a field existed were made with its default (e.g. segmenter "sim")
-        for field in fields(config):
-            if field.name not in made and field.default is not MISSING:
-                made[field.name] = json.loads(json.dumps(EVAL_FIELDS_BEFORE.get(field.name, field.default)))
+        made = saved_config(previous.get("config") or {})
         for name in _EVAL_FIELDS_NOT_MEASURED:
             wanted.pop(name, None)
             made.pop(name, None)

@@ -1,9 +1,9 @@
 """Obstacle shapes as a registry: one object per shape owns how it is fitted, described and drawn.
 
-    fit(points (N, 3) m, *, held_radius, margin, xy_only) -> cost   an `Obstacle` / `PositionCost` (None: too few points)
-    describe(obstacle)  -> str                                      one line for results and logs
-    plot_data(obstacle) -> dict                                     plain numbers for results JSON and for draw()
-    draw(ax, data, *, label=None) -> list of artists                top view (x, y) on a matplotlib Axes
+    fit(points (N, 3) m, *, held_radius, margin, xy_only) -> a `costs.Obstacle` (None: too few points)
+    describe(obstacle)                                    -> one line (str) for results and logs
+    plot_data(obstacle)                                   -> plain numbers (dict) for results JSON and for draw()
+    draw(ax, data, *, label=None)                         -> the artists it added to a top-view (x, y) Axes
 
 `draw` takes the plain data, not the cost, because top views are drawn from results (`report.plot_top_view`), also
 from results JSON read back later. Built in: "cylinder" (the paper), "box" and "points". A new shape is one class

@@ -101,6 +101,25 @@ def segmenter(kind: str, detector: str, detector_dir: Path | None, sam_dir: Path
                                      param_hint="--segmenter")
 
 
+def obstacle_shape_help() -> str:
+    """--obstacle-shape's help: the names registered when the command line is imported (torch-free)."""
+    from lano3dp.guidance.shapes import obstacle_shape_names
+
+    return (f"Shape fitted to each obstacle's points: {' | '.join(obstacle_shape_names())} (cylinder: the paper's); "
+            "more with lano3dp.guidance.register_obstacle_shape, e.g. in the --env module.")
+
+
+def obstacle_shape(name: str, option: str = "--obstacle-shape") -> str:
+    """A registered shape; checked after --env is imported, since that module may register one."""
+    from lano3dp.guidance.shapes import UnknownObstacleShapeError, get_obstacle_shape
+
+    try:
+        get_obstacle_shape(name)
+    except UnknownObstacleShapeError as error:
+        raise typer.BadParameter(str(error), param_hint=option) from None
+    return name
+
+
 ENV_HELP = ("Your own simulator or robot: module:factory or path/to/file.py:factory, called with task, seed, "
             "variation, image_size, render_rgb, max_steps (those it names) and returning an env meeting "
             "lano3dp.sim.protocol (default: the built-in simulator).")

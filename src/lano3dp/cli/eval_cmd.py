@@ -43,6 +43,8 @@ def eval_command(
     refit_obstacles: bool = typer.Option(False, help="Re-fit obstacles before every chunk (moving obstacles)."),
     guide_when_needed: bool = typer.Option(False, help="Guide a chunk only when the policy's own one comes within "
                                                        "the margin of an obstacle."),
+    obstacle_shape: str = typer.Option("cylinder", "--obstacle-shape", metavar="NAME",
+                                       help=_options.obstacle_shape_help()),
     body: str = typer.Option("swept", help="What guidance keeps clear: swept (hand + held object, re-measured "
                                           "every chunk) | sphere (the paper: one ball round the EE point)."),
     held_radius: float = typer.Option(None, help="--body sphere: its radius (m) in Q*; default: measured from the "
@@ -76,6 +78,7 @@ def eval_command(
     _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
     _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
     _options.choice(body, ("swept", "sphere"), "--body")
+    _options.obstacle_shape(obstacle_shape)
     if held_radius is not None and body != "sphere":
         raise typer.BadParameter("a fixed held radius sizes the sphere body model; add --body sphere",
                                  param_hint="--held-radius")
@@ -92,7 +95,7 @@ def eval_command(
         checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
         obstacles=list(obstacles) if obstacles else None, guidance=guidance, rho=rho, last_steps=last_steps,
         per_train_step=per_train_step, metric_gradient=metric_push, densify=densify, scheduler=scheduler, steps=steps,
-        checked=checked, margin=margin,
+        checked=checked, margin=margin, obstacle_shape=obstacle_shape,
         body=body, obstacle_scenes_only=obstacle_scenes_only, refit_obstacles=refit_obstacles,
         guide_when_needed=guide_when_needed,
         held_radius=held_radius, max_steps=max_steps, workers=workers,

@@ -31,6 +31,8 @@ def run_command(
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, help="Denoising steps (default: the policy's)."),
     checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
+    obstacle_shape: str = typer.Option("cylinder", "--obstacle-shape", metavar="NAME",
+                                       help=_options.obstacle_shape_help()),
     compare: bool = typer.Option(False, help="Also run the same scene without guidance (both paths in the plot)."),
     max_steps: int = typer.Option(None, help="Episode step limit (default: the task's)."),
     seed: int = typer.Option(1_000_000, help="Scene seed."),
@@ -55,6 +57,7 @@ def run_command(
         _options.variation(variation)
     _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
     _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
+    _options.obstacle_shape(obstacle_shape)
     _options.segmenter(segmenter, detector, detector_dir, sam_dir)
     _options.existing_path(checkpoint, "--checkpoint")
     _options.existing_path(registry, "--registry")
@@ -63,7 +66,7 @@ def run_command(
                        registry=str(registry) if registry else None, task=task, variation=variation,
                        guidance=guidance, rho=rho, last_steps=last_steps, metric_gradient=metric_push,
                        scheduler=scheduler, steps=steps,
-                       checked=checked, compare=compare, max_steps=max_steps, seed=seed, out=str(out),
+                       checked=checked, obstacle_shape=obstacle_shape, compare=compare, max_steps=max_steps, seed=seed, out=str(out),
                        segmenter=segmenter, detector=detector,
                        detector_dir=str(detector_dir) if detector_dir else None,
                        sam_dir=str(sam_dir) if sam_dir else None, env=env)

@@ -170,13 +170,32 @@ def test_the_configs_and_the_command_line_take_a_registered_shape(ball, tmp_path
     config = EvalConfig(checkpoint="run", obstacle_shape="sphere")
     assert runtime_config(config, 0).obstacle.shape == "sphere"
     assert RunConfig("pour the bowl into the pan", obstacle_shape="sphere").obstacle_shape == "sphere"
-    # spawned eval workers start with the built-in shapes: the registered one travels to them (it pickles)
-    assert shapes_for_workers("cylinder") == {} and isinstance(shapes_for_workers("sphere")["sphere"], BallShape)
+    assert shapes_for_workers("cylinder") == {}
     runner = CliRunner()
     for command in (["eval", "--task", "bowl_pour"], ["run", "pour the bowl into the pan"]):
         result = runner.invoke(app, [*command, "--obstacle-shape", "sphere", "--checkpoint", str(tmp_path / "none")])
         # the shape is accepted: the next check, the missing checkpoint, is what stops the command
         assert result.exit_code == 2 and "--checkpoint" in result.output and "obstacle shape" not in result.output
+
+
+def test_eval_workers_get_the_registered_shape(ball, monkeypatch):
+    import lano3dp.evaluate as evaluate_module
+
+    # spawned eval workers start with the built-in shapes: the parent's registered one travels to them pickled
+    payloads = shapes_for_workers("sphere")
+    unregister_obstacle_shape("sphere")
+    monkeypatch.setattr(evaluate_module, "_WORKER_ERROR", None)
+    evaluate_module._worker_init({"checkpoint": "no-such-run", "obstacle_shape": "sphere"}, payloads)
+    assert isinstance(get_obstacle_shape("sphere"), BallShape)
+    # the config was accepted: what stopped this worker is the missing checkpoint, not the shape
+    assert isinstance(evaluate_module._WORKER_ERROR, FileNotFoundError)
+
+    class Local(BallShape):  # defined inside a function: a worker could not import it
+        pass
+
+    register_obstacle_shape("sphere", Local(), replace=True)
+    with pytest.raises(ValueError, match="'sphere' cannot be sent to worker processes"):
+        shapes_for_workers("sphere")
 
 
 def test_a_shape_registered_by_the_env_module_is_accepted_by_the_command_line(tmp_path):

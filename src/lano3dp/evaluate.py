@@ -366,17 +366,22 @@ _WORKER: EpisodeRunner | None = None
 _WORKER_ERROR: BaseException | None = None
 
 
-def _worker_init(config_dict: dict[str, Any], shapes: dict[str, Any] | None = None) -> None:
+def _worker_init(config_dict: dict[str, Any], shapes: dict[str, bytes] | None = None) -> None:
     global _WORKER, _WORKER_ERROR
     os.environ["OMP_NUM_THREADS"] = "1"
     import torch
 
     torch.set_num_threads(1)
     try:
-        from lano3dp.guidance.shapes import register_obstacle_shape
+        if shapes:  # a spawned process has only the built-in shapes: register the parent's (shapes_for_workers)
+            import pickle
 
-        for name, shape in (shapes or {}).items():  # a spawned process has only the built-in shapes
-            register_obstacle_shape(name, shape, replace=True)
+            from lano3dp.guidance.shapes import register_obstacle_shape
+
+            if config_dict.get("env"):  # a shape class may live in the --env file, imported under its own name
+                env_factory.load_factory(config_dict["env"])
+            for name, payload in shapes.items():
+                register_obstacle_shape(name, pickle.loads(payload), replace=True)
         _WORKER = EpisodeRunner(EvalConfig(**config_dict))
     except Exception as error:  # a Pool re-spawns workers whose initializer raises, forever: report it per job
         _WORKER_ERROR = error
@@ -389,22 +394,21 @@ def _worker_run(job: tuple[int, int, str | None]) -> tuple[int, dict[str, Any]]:
     return index, _WORKER.run(seed, video)
 
 
-def shapes_for_workers(name: str) -> dict[str, Any]:
-    """{name: shape} for a shape registered in this process and not built in, checked to pickle, as spawned
-    worker processes start with the built-in shapes alone; {} for a built-in one."""
+def shapes_for_workers(name: str) -> dict[str, bytes]:
+    """{name: pickled shape} for a shape registered in this process and not built in, as spawned worker processes
+    start with the built-in shapes alone; {} for a built-in one. Pickled here, unpickled in `_worker_init`, so a
+    worker that cannot unpickle it reports that per episode instead of dying before its initializer runs."""
     import pickle
 
     from lano3dp.guidance.shapes import BUILTIN_OBSTACLE_SHAPES, get_obstacle_shape
 
     if name in BUILTIN_OBSTACLE_SHAPES:
         return {}
-    shape = get_obstacle_shape(name)
     try:
-        pickle.dumps(shape)
-    except Exception as error:
+        return {name: pickle.dumps(get_obstacle_shape(name))}
+    except (pickle.PicklingError, AttributeError, TypeError) as error:
         raise ValueError(f"obstacle shape {name!r} cannot be sent to worker processes ({error}); define its class "
                          "at the top level of an importable module, or evaluate with workers=1") from None
-    return {name: shape}
 
 
 # ---- the whole evaluation ------------------------------------------------------------------------

@@ -66,7 +66,8 @@ def run_command(
                        registry=str(registry) if registry else None, task=task, variation=variation,
                        guidance=guidance, rho=rho, last_steps=last_steps, metric_gradient=metric_push,
                        scheduler=scheduler, steps=steps,
-                       checked=checked, obstacle_shape=obstacle_shape, compare=compare, max_steps=max_steps, seed=seed, out=str(out),
+                       checked=checked, obstacle_shape=obstacle_shape, compare=compare, max_steps=max_steps,
+                       seed=seed, out=str(out),
                        segmenter=segmenter, detector=detector,
                        detector_dir=str(detector_dir) if detector_dir else None,
                        sam_dir=str(sam_dir) if sam_dir else None, env=env)

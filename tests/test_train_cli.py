@@ -29,6 +29,16 @@ def test_train_command_trains_a_loadable_policy(tmp_path):
     assert saved["seed"] == 3 and saved["steps"] == 2
 
 
+def test_train_command_pose_features_reach_the_policy(tmp_path):
+    data = _reach_store(tmp_path)
+    result = CliRunner().invoke(app, ["train", "--data", str(data), "--out", str(tmp_path / "run"), "--steps", "1",
+                                      "--batch-size", "4", "--warmup-steps", "0", "--horizon", "8",
+                                      "--n-action-steps", "4", "--val-ratio", "0", "--no-progress",
+                                      "--pose-features"])
+    assert result.exit_code == 0, result.output
+    assert DiffusionPolicy.from_pretrained(tmp_path / "run").config.object_pose_features
+
+
 def test_train_command_reports_a_dataset_that_lacks_the_observation(tmp_path):
     data = _reach_store(tmp_path)
     result = CliRunner().invoke(app, ["train", "--data", str(data), "--out", str(tmp_path / "run"),

@@ -107,8 +107,8 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
     Give `steps`, or `minutes`: a budget of CPU time (this process, all threads) for the optimisation. The
     planned step count comes from a short timing probe (`time_training_step`); the trainer stops at the budget
     if the steps turn out dearer than probed, and its learning rate follows whichever ends first, the steps
-    or the budget (`train.training_progress`), so such a run still ends with the rate decayed. An existing run keeps the step
-    count and budget it was started with; a run stopped by its budget counts as complete. Without
+    or the budget (`train.training_progress`), so such a run still ends with the rate decayed. An existing
+    run keeps the step count and budget it was started with; a run stopped by its budget counts as complete. Without
     `ckpt_every`, the run checkpoints `n_checkpoints` times, evenly along its planned steps.
 
     One torch thread by default: under a CPU-time budget it buys the most steps (two threads run a step at

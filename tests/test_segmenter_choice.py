@@ -111,3 +111,21 @@ def test_results_cached_before_the_segmenter_option_still_count_as_up_to_date(tm
     other = EvalConfig(checkpoint="run", task="bowl_pour", episodes=2, out=str(tmp_path / "r.json"),
                        segmenter="open-vocab", detector_dir="d", sam_dir="s")
     assert cached_eval(other) is None  # made with the simulator's masks, not open-vocab: re-run
+
+
+def test_results_older_than_the_checkpoint_weights_are_not_reused(tmp_path):
+    """A policy re-written in place (a re-packaged task keeps its folder) must be evaluated again."""
+    import os
+
+    checkpoint = tmp_path / "policy"
+    checkpoint.mkdir()
+    (checkpoint / "config.json").write_text("{}")
+    (checkpoint / "model.safetensors").write_bytes(b"old weights")
+    config = EvalConfig(checkpoint=str(checkpoint), task="bowl_pour", episodes=2, out=str(tmp_path / "r.json"))
+    saved = {"config": json.loads(json.dumps(config.__dict__)), "summary": {"episodes": 2}}
+    (tmp_path / "r.json").write_text(json.dumps(saved))
+    os.utime(checkpoint / "model.safetensors", (1_000_000, 1_000_000))
+    assert cached_eval(config) == saved
+    os.utime(checkpoint / "model.safetensors")  # written again now, after the results
+    os.utime(tmp_path / "r.json", (1_000_000, 1_000_000))
+    assert cached_eval(config) is None

@@ -161,12 +161,25 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
 
 
 # ---- evaluate --------------------------------------------------------------------------------------
+def _weights_newer_than(checkpoint: str, results: Path) -> bool:
+    """Whether the policy weights in `checkpoint` were written after `results` (False when there are none)."""
+    from lano3dp.policy.modeling import WEIGHTS_NAME, resolve_checkpoint
+
+    try:
+        weights = resolve_checkpoint(checkpoint) / WEIGHTS_NAME
+        return weights.stat().st_mtime > results.stat().st_mtime
+    except FileNotFoundError:
+        return False
+
+
 def cached_eval(config) -> dict[str, Any] | None:
-    """The results in `config.out` if they were made with this EvalConfig (up to the worker count), else None."""
+    """The results in `config.out` if they were made with this EvalConfig (up to the worker count) and the
+    checkpoint's weights are not newer than them, else None. The weights matter because a folder can be
+    re-written in place (a re-packaged policy keeps its path): its old results would otherwise be reused."""
     from lano3dp.evaluate import EVAL_FIELDS_NOT_MEASURED as _EVAL_FIELDS_NOT_MEASURED
     from lano3dp.evaluate import saved_config
 
-    if config.out and Path(config.out).exists():
+    if config.out and Path(config.out).exists() and not _weights_newer_than(config.checkpoint, Path(config.out)):
         previous = json.loads(Path(config.out).read_text())
         wanted = json.loads(json.dumps(asdict(config)))
         # results saved before a field existed were made with its default (e.g. segmenter "sim")

@@ -2,23 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from bench_loader import load_bench
 from lano3dp.geometry.rotations import matrix_to_rot6d
-
-ROOT = Path(__file__).resolve().parent.parent
 
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("bench_grasp_error", ROOT / "bench" / "bench_grasp_error.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
-    return bench
+    return load_bench("bench_grasp_error")
 
 
 def _top_down_action(yaw: float, grip: float = 1.0) -> np.ndarray:

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
 
+import bench_loader
 from lano3dp.policy import DiffusionPolicy, pretrained
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -15,10 +15,7 @@ pytestmark = pytest.mark.slow
 
 
 def load_bench():
-    spec = importlib.util.spec_from_file_location("bench_learning", ROOT / "bench" / "bench_learning.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return bench_loader.load_bench("bench_learning")
 
 
 def fake_eval(path: Path, successes: int, episodes: int) -> None:

@@ -1,12 +1,8 @@
 """The obstacle bench's failure classes and report, on synthetic episode records (no simulation)."""
 
-import importlib.util
-from pathlib import Path
+from bench_loader import load_bench
 
-ROOT = Path(__file__).resolve().parent.parent
-spec = importlib.util.spec_from_file_location("bench_obstacles", ROOT / "bench" / "bench_obstacles.py")
-bench = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(bench)
+bench = load_bench("bench_obstacles")
 
 STAGES = ("reached_block", "grasped", "lifted", "carried_to_drawer", "placed")
 

@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+from bench_loader import load_bench
+
 pytestmark = pytest.mark.slow
 
 
 def test_a_shipped_policy_is_scored_on_held_out_seeds_beside_its_record(tmp_path):
-    spec = importlib.util.spec_from_file_location("bench_packaged", ROOT / "bench" / "bench_packaged.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_bench("bench_packaged")
     bench.main(["--tasks", "close_microwave", "--episodes", "2", "--workers", "1", "--work", str(tmp_path / "work"),
                 "--results", str(tmp_path)])
     report = json.loads((tmp_path / "packaged.json").read_text())

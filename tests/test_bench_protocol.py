@@ -1,18 +1,13 @@
 """The protocol benchmark's table: runs missing from the work folder are shown as not run, never dropped."""
 
-import importlib.util
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parent.parent
+import bench_loader
 
 
 def load_bench():
-    spec = importlib.util.spec_from_file_location("bench_protocol", ROOT / "bench" / "bench_protocol.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return bench_loader.load_bench("bench_protocol")
 
 
 def summary(successes: int, episodes: int = 20, **extra) -> dict:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 
+import bench_loader
 from lano3dp.executor import (
     Cell,
     CellFailedError,
@@ -28,7 +29,6 @@ from lano3dp.executor import (
     ordered,
 )
 
-ROOT = Path(__file__).resolve().parent.parent
 HAVE_RAY = importlib.util.find_spec("ray") is not None  # not imported here: lano3dp sets Ray's env first
 
 
@@ -128,10 +128,7 @@ def test_without_ray_the_ray_executor_says_how_to_install_it(monkeypatch, capsys
 
 # ---- the reduced protocol, by every executor ----------------------------------------------------------
 def load_bench():
-    spec = importlib.util.spec_from_file_location("bench_protocol", ROOT / "bench" / "bench_protocol.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return bench_loader.load_bench("bench_protocol")
 
 
 # One clean task with a camera variation, one obstacle task: every kind of cell, 11 in all.

@@ -50,8 +50,12 @@ from lano3dp.guidance.costs import (
 )
 from lano3dp.guidance.fitting import fit_cylinder
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
-from lano3dp.guidance.shapes import BUILTIN_OBSTACLE_SHAPES, fit_obstacle, get_obstacle_shape
-from lano3dp.guidance.shapes import describe_obstacle as _describe_obstacle
+from lano3dp.guidance.shapes import (
+    BUILTIN_OBSTACLE_SHAPES,
+    describe_obstacle,  # re-exported: results and plots read it from here
+    fit_obstacle,
+    get_obstacle_shape,
+)
 from lano3dp.perception.exceptions import PerceptionError, TooFewPointsError
 
 # The built-in shapes (kept for code that imported it); `guidance.obstacle_shape_names()` lists every registered one.
@@ -633,12 +637,6 @@ class EpisodeResult:
         if not include_path:
             data.pop("ee_path")
         return data
-
-
-def describe_obstacle(obstacle, shape: str | None = None) -> dict[str, Any]:
-    """A fitted obstacle as plain data (for JSON and plots): cost class, centre, size and safety distance (m), the
-    registered shape that fitted it and a one-line description (`guidance.shapes.describe_obstacle`)."""
-    return _describe_obstacle(obstacle, shape)
 
 
 def path_length(positions: np.ndarray) -> float:

@@ -13,9 +13,11 @@ import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-OBS_TYPES = ("objects", "scene", "image")
+if TYPE_CHECKING:
+    from lano3dp.policy.observations import ObservationType
+
 POINT_ENCODERS = ("residual", "mlp")
 INFERENCE_SCHEDULERS = ("ddpm", "ddim")
 ACTION_FRAMES = ("absolute", "relative")
@@ -30,17 +32,13 @@ DOWN_DIMS_PRESETS: dict[str, tuple[int, ...]] = {
     "dp": (256, 512, 1024),
 }
 
-# Observation keys each obs_type reads from the dataset, besides "state".
-VISUAL_KEYS = {"objects": "object_clouds", "scene": "scene_cloud", "image": "rgb"}
-
-
 @dataclass
 class PolicyConfig:
     """Everything needed to rebuild a DiffusionPolicy (saved as config.json beside its weights).
 
     Attributes:
-        obs_type: "objects" (Lan-o3dp: one cloud per named object), "scene" (DP3: the cropped scene cloud)
-            or "image" (Diffusion Policy: a 96x96 RGB image).
+        obs_type: "objects" (Lan-o3dp: one cloud per named object), "scene" (DP3: the cropped scene cloud),
+            "image" (Diffusion Policy: a 96x96 RGB image) or another registered type (`policy.observations`).
         object_names: the object slots, in the order the dataset stores them (obs_type "objects").
         n_points: points per object cloud the policy was trained on (any N works at inference: max-pool).
         scene_points: points of the scene cloud (obs_type "scene").
@@ -111,19 +109,20 @@ class PolicyConfig:
             if not condition:
                 raise ValueError(f"PolicyConfig: {message}")
 
-        need(self.obs_type in OBS_TYPES, f"obs_type must be one of {OBS_TYPES}, got {self.obs_type!r}")
+        try:
+            observation = self.observation
+        except ValueError as error:  # UnknownObservationTypeError, naming the registered types
+            raise ValueError(f"PolicyConfig: {error}") from None
         need(self.point_encoder in POINT_ENCODERS,
              f"point_encoder must be one of {POINT_ENCODERS}, got {self.point_encoder!r}")
         need(self.inference_scheduler in INFERENCE_SCHEDULERS,
              f"inference_scheduler must be one of {INFERENCE_SCHEDULERS}, got {self.inference_scheduler!r}")
         need(self.action_frame in ACTION_FRAMES,
              f"action_frame must be one of {ACTION_FRAMES}, got {self.action_frame!r}")
-        if self.obs_type == "objects":
-            need(len(self.object_names) >= 1, "obs_type 'objects' needs object_names (the slot order)")
-            need(len(set(self.object_names)) == len(self.object_names),
-                 f"object_names must be distinct, got {self.object_names}")
-        need(not self.object_pose_features or self.obs_type == "objects",
-             f"object_pose_features needs obs_type 'objects' (one cloud per object), got {self.obs_type!r}")
+        try:
+            observation.validate(self)
+        except ValueError as error:
+            raise ValueError(f"PolicyConfig: {error}") from None
         for name in ("n_points", "scene_points", "image_size", "state_dim", "action_dim", "n_obs_steps", "horizon",
                      "n_action_steps", "diffusion_step_embed_dim", "kernel_size", "n_groups", "encoder_out",
                      "state_feature_dim", "num_train_timesteps"):
@@ -151,9 +150,16 @@ class PolicyConfig:
 
     # ---- derived -----------------------------------------------------------------------
     @property
+    def observation(self) -> ObservationType:
+        """The registered observation type `obs_type` names (`policy.observations`)."""
+        from lano3dp.policy.observations import get_observation_type  # the registry's modules import this one
+
+        return get_observation_type(self.obs_type)
+
+    @property
     def visual_key(self) -> str:
-        """The dataset / observation key of the visual input ("object_clouds", "scene_cloud" or "rgb")."""
-        return VISUAL_KEYS[self.obs_type]
+        """The dataset / observation key of the visual input ("object_clouds", "scene_cloud", "rgb", ...)."""
+        return self.observation.key
 
     @property
     def obs_keys(self) -> tuple[str, str]:
@@ -168,7 +174,7 @@ class PolicyConfig:
     @property
     def n_slots(self) -> int:
         """K, the number of object clouds (1 for the scene cloud and image baselines)."""
-        return len(self.object_names) if self.obs_type == "objects" else 1
+        return len(self.object_names) if self.observation.object_slots else 1
 
     # ---- serialisation -----------------------------------------------------------------
     def to_dict(self) -> dict[str, Any]:

@@ -1,7 +1,8 @@
 """Observation encoders: object clouds (Lan-o3dp), scene cloud (DP3) and RGB image (Diffusion Policy).
 
-Each maps one observation step to a flat feature; `ObservationEncoder` concatenates the visual
-feature with the state feature, for every observation step the UNet is conditioned on.
+Each maps one observation step to a flat feature (the observation types of `policy.observations` build them);
+`ObservationEncoder` concatenates the visual feature with the state feature, for every observation step the UNet
+is conditioned on.
 """
 
 from __future__ import annotations
@@ -223,8 +224,7 @@ class ObservationEncoder(nn.Module):
         super().__init__()
         self.visual_key = config.visual_key
         self.n_obs_steps = config.n_obs_steps
-        self.visual = {"objects": ObjectCloudsEncoder, "scene": SceneCloudEncoder, "image": ImageEncoder}[
-            config.obs_type](config)
+        self.visual = config.observation.encoder(config)  # the obs_type's own module builds it
         self.state = StateEncoder(config)
         self.step_dim = self.visual.out_dim + self.state.out_dim
         self.out_dim = self.step_dim * config.n_obs_steps

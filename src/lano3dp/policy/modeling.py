@@ -78,15 +78,17 @@ class DiffusionPolicy(nn.Module):
     """Object-centric 3D diffusion policy (or a baseline, by `config.obs_type`).
 
     Observations: {"object_clouds": (B, To, K, N, 3) metres, world frame, slots in config.object_names order;
-    "state": (B, To, 11)}; the baselines use "scene_cloud" (B, To, N, 3) or "rgb" (B, To, H, W, 3) uint8.
+    "state": (B, To, 11)}; the baselines use "scene_cloud" (B, To, N, 3) or "rgb" (B, To, H, W, 3) uint8, and a
+    registered observation type its own key (`policy.observations`).
     """
 
     def __init__(self, config: PolicyConfig):
         super().__init__()
         self.config = config
         stats_dims = {"action": config.action_dim, "state": config.state_dim}
-        if config.obs_type != "image":  # images are scaled to [-1, 1] by the encoder, from uint8
-            stats_dims[config.visual_key] = 3
+        visual_dim = config.observation.normalizer_dim(config)  # None: e.g. images, scaled by their encoder
+        if visual_dim is not None:
+            stats_dims[config.visual_key] = visual_dim
         self.normalizer = LinearNormalizer(stats_dims)
         self.obs_encoder = ObservationEncoder(config)
         self.unet = ConditionalUnet1D(config.action_dim, self.obs_encoder.out_dim, config.diffusion_step_embed_dim,
@@ -112,9 +114,8 @@ class DiffusionPolicy(nn.Module):
                                            self.config.n_obs_steps, self.config.horizon)
         else:
             actions = dataset.all_actions()
-        data = {"action": actions, "state": dataset.all_obs("state")}
-        if self.config.obs_type != "image":
-            data[self.config.visual_key] = dataset.all_obs(self.config.visual_key)
+        data = {key: dataset.all_obs(key) for key in self.normalizer.keys if key != "action"}
+        data["action"] = actions
         self.normalizer.fit(data)
 
     def normalizer_stats(self) -> dict[str, dict[str, np.ndarray]]:
@@ -148,7 +149,7 @@ class DiffusionPolicy(nn.Module):
             if key not in obs:
                 raise KeyError(f"observation is missing {key!r}; a {config.obs_type!r} policy needs {config.obs_keys}")
             value = torch.as_tensor(obs[key], device=self.device)
-            if key != "rgb":
+            if key in self.normalizer.keys:  # an unnormalised input (uint8 images) goes to its encoder as it is
                 value = value.float()
             if value.ndim < 3 or value.shape[1] < config.n_obs_steps:
                 raise ValueError(f"{key} must be (batch, steps >= n_obs_steps={config.n_obs_steps}, ...), "

@@ -16,6 +16,7 @@ import pytest
 import torch
 
 from lano3dp.errors import Lano3dpError
+from lano3dp.geometry.frame import resize_rgb
 from lano3dp.geometry.rotations import matrix_to_rot6d
 from lano3dp.guidance import CheckConfig, Cylinder, Densified, GuidanceConfig, MetricGradient
 from lano3dp.perception import ObjectNotFoundError, ObjectObserver, SimOracleSegmenter
@@ -29,7 +30,6 @@ from lano3dp.runtime import (
     RuntimeConfig,
     observe,
     path_length,
-    resize_rgb,
     rollout,
     scene_obstacles,
 )
@@ -358,9 +358,11 @@ def test_a_target_hidden_after_the_first_frame_keeps_its_previous_cloud(observer
 
 def test_the_collector_and_the_runtime_share_one_resize_and_one_observe():
     from lano3dp.data import collect
+    from lano3dp.policy.observations import image
     from lano3dp.runtime import observe
 
-    assert collect.resize_rgb is resize_rgb and collect.observe is observe
+    # the image type's one module both records the images and makes them at run time
+    assert image.resize_rgb is resize_rgb and collect.observe is observe
 
 
 def test_resize_rgb_averages_areas():

@@ -58,10 +58,11 @@ def _rotate_xy(values: torch.Tensor, cos: torch.Tensor, sin: torch.Tensor) -> to
     return torch.stack([cos * x - sin * y, sin * x + cos * y, values[..., 2]], dim=-1)
 
 
-def augment_batch(batch: dict, visual_key: str, config: AugmentConfig, generator: torch.Generator) -> dict:
+def augment_batch(batch: dict, visual_key: str | None, config: AugmentConfig, generator: torch.Generator) -> dict:
     """A new batch {"obs": {visual_key: (B, To, [K,] N, 3), "state": (B, To, 11)}, "action": (B, H, 10)}, raw units.
 
-    Images ("rgb") get no geometric augmentation: a moved scene would need a re-render.
+    `visual_key` names the world-frame xyz clouds moved with the scene; None for an input that is not one (images
+    get no geometric augmentation: a moved scene would need a re-render), which passes through unchanged.
     """
     obs, actions = batch["obs"], batch["action"].float()
     state = obs["state"].float()
@@ -91,7 +92,7 @@ def augment_batch(batch: dict, visual_key: str, config: AugmentConfig, generator
 
     new_obs = dict(obs)
     new_obs["state"] = move_poses(state)
-    if visual_key != "rgb":
+    if visual_key is not None:
         clouds = move_points(obs[visual_key].float())
         if config.jitter > 0:
             clouds = clouds + torch.randn(clouds.shape, generator=generator, device=device) * config.jitter

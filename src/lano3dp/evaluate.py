@@ -298,7 +298,7 @@ class EpisodeRunner:
         check_env_task(task, self.policy.config, config.env)
         self.task = task
         image_size = config.image_size or settings.image_size or 128
-        needs_rgb = self.policy.config.obs_type == "image" or bool(config.video_dir)
+        needs_rgb = self.policy.config.observation.needs_rgb or bool(config.video_dir)
         self.env = env_factory.make_env(config.env, task=task, seed=config.seed, variation=config.variation,
                                         image_size=image_size, render_rgb=needs_rgb, max_steps=config.max_steps)
         # the simulator truncates at its own limit; a user's env may not, so its max_steps attribute bounds it
@@ -320,7 +320,7 @@ class EpisodeRunner:
             targets = [phrases.get(slot, slot) for slot in slots] if slots else None
             obstacles = config.obstacles if config.obstacles is not None else scene_obstacles(frame)
             held = phrases.get(carried, carried) if carried else None
-            runner.set_objects(targets if runner.policy_config.obs_type == "objects" else None, obstacles, held)
+            runner.set_objects(targets if runner.policy_config.observation.object_slots else None, obstacles, held)
 
         frames: list[np.ndarray] = []
         on_frame = (lambda frame, info: frames.append(frame.rgb.copy())) if video_path else None
@@ -366,22 +366,28 @@ _WORKER: EpisodeRunner | None = None
 _WORKER_ERROR: BaseException | None = None
 
 
-def _worker_init(config_dict: dict[str, Any], shapes: dict[str, bytes] | None = None) -> None:
+def _worker_init(config_dict: dict[str, Any], shapes: dict[str, bytes] | None = None,
+                 observation_types: dict[str, bytes] | None = None) -> None:
     global _WORKER, _WORKER_ERROR
     os.environ["OMP_NUM_THREADS"] = "1"
     import torch
 
     torch.set_num_threads(1)
     try:
-        if shapes:  # a spawned process has only the built-in shapes: register the parent's (shapes_for_workers)
+        # a spawned process has only the built-in shapes and observation types: register the parent's ones
+        # (shapes_for_workers, observation_types_for_workers)
+        if shapes or observation_types:
             import pickle
 
             from lano3dp.guidance.shapes import register_obstacle_shape
+            from lano3dp.policy.observations import register_observation_type
 
-            if config_dict.get("env"):  # a shape class may live in the --env file, imported under its own name
+            if config_dict.get("env"):  # a class may live in the --env file, imported under its own name
                 env_factory.load_factory(config_dict["env"])
-            for name, payload in shapes.items():
+            for name, payload in (shapes or {}).items():
                 register_obstacle_shape(name, pickle.loads(payload), replace=True)
+            for name, payload in (observation_types or {}).items():
+                register_observation_type(name, pickle.loads(payload), replace=True)
         _WORKER = EpisodeRunner(EvalConfig(**config_dict))
     except Exception as error:  # a Pool re-spawns workers whose initializer raises, forever: report it per job
         _WORKER_ERROR = error
@@ -408,6 +414,22 @@ def shapes_for_workers(name: str) -> dict[str, bytes]:
         return {name: pickle.dumps(get_obstacle_shape(name))}
     except (pickle.PicklingError, AttributeError, TypeError) as error:
         raise ValueError(f"obstacle shape {name!r} cannot be sent to worker processes ({error}); define its class "
+                         "at the top level of an importable module, or evaluate with workers=1") from None
+
+
+def observation_types_for_workers(name: str) -> dict[str, bytes]:
+    """{name: pickled observation type} for a type registered in this process and not built in (a checkpoint's
+    obs_type), as spawned worker processes start with the built-in ones alone; {} for a built-in one."""
+    import pickle
+
+    from lano3dp.policy.observations import BUILTIN_OBSERVATION_TYPES, get_observation_type
+
+    if name in BUILTIN_OBSERVATION_TYPES:
+        return {}
+    try:
+        return {name: pickle.dumps(get_observation_type(name))}
+    except (pickle.PicklingError, AttributeError, TypeError) as error:
+        raise ValueError(f"observation type {name!r} cannot be sent to worker processes ({error}); define its class "
                          "at the top level of an importable module, or evaluate with workers=1") from None
 
 
@@ -670,8 +692,9 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
             runner.close()
     elif jobs:
         context = mp.get_context("spawn")
-        with context.Pool(workers, initializer=_worker_init,
-                          initargs=(asdict(config), shapes_for_workers(config.obstacle_shape))) as pool:
+        plugins = (shapes_for_workers(config.obstacle_shape),
+                   observation_types_for_workers(load_config(checkpoint / "config.json").obs_type))
+        with context.Pool(workers, initializer=_worker_init, initargs=(asdict(config), *plugins)) as pool:
             for index, record in pool.imap_unordered(_worker_run, jobs):
                 finished(index, record)
     episodes = [records[index] for index in sorted(records)]
@@ -874,7 +897,7 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
         obstacles, notes = ground_obstacles(frame, plan.obstacle_phrases)
     for note in notes:
         log(f"note: {note}")
-    targets = plan.target_phrases if policy.config.obs_type == "objects" else None
+    targets = plan.target_phrases if policy.config.observation.object_slots else None
     carried = registry.get(plan.skill).carried_slot if plan.skill in registry else None
     held = plan.target_phrases[carried] if carried is not None else None
     log(f"task {task} / {variation}, seed {seed}: targets {targets}, obstacles {obstacles}")

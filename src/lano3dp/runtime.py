@@ -6,7 +6,8 @@ protocol (`lano3dp.sim.protocol`): `reset(seed, options) -> (obs, info)` and
 `RGBDFrame` and the 11-D robot state.
 
     PolicyRunner     keeps the last n_obs_steps observations (the policy's window), turns each frame into
-                     the policy's visual input (object clouds / scene cloud / 96x96 RGB), turns obstacle
+                     the policy's visual input (object clouds / scene cloud / 96x96 RGB: its observation
+                     type's `runtime_input`, `policy.observations`), turns obstacle
                      phrases into guidance costs, samples a chunk and hands out its n_action_steps
                      actions one by one before re-planning (receding horizon, as Diffusion Policy).
                      A policy trained with a time stride S (PolicyConfig.time_stride) observes and acts every
@@ -38,7 +39,7 @@ import numpy as np
 import torch
 
 from lano3dp.errors import EmptyCloudError, Lano3dpError
-from lano3dp.geometry.frame import RGBDFrame, observe, resize_rgb
+from lano3dp.geometry.frame import RGBDFrame, observe
 from lano3dp.geometry.rotations import quat_to_rot6d, rot6d_to_quat, slerp
 from lano3dp.guidance.checked import CheckConfig, checked_sample
 from lano3dp.guidance.costs import (
@@ -277,12 +278,13 @@ class PolicyRunner:
             raise ValueError(f"n_action_steps {self.n_action_steps} exceeds what one chunk holds "
                              f"(horizon {pc.horizon} - n_obs_steps {pc.n_obs_steps} + 1)")
         self.target_phrases = tuple(target_phrases) if target_phrases is not None else tuple(pc.object_names)
-        if pc.obs_type == "objects":
+        if pc.observation.object_slots:
             if len(self.target_phrases) != len(pc.object_names):
                 raise ValueError(f"the policy has {len(pc.object_names)} object slots {tuple(pc.object_names)} but "
                                  f"{len(self.target_phrases)} target phrases were given: {self.target_phrases}")
             if observer is None and visual_fn is None:
-                raise ValueError("an 'objects' policy needs an observer (segmenter) to build its object clouds")
+                raise ValueError(f"an {pc.obs_type!r} policy needs an observer (segmenter) to build its object "
+                                 "clouds")
         self.obstacle_phrases = tuple(obstacle_phrases)
         if self.obstacle_phrases and observer is None:
             raise ValueError(f"obstacles {self.obstacle_phrases} need an observer to segment them")
@@ -333,7 +335,8 @@ class PolicyRunner:
         the gripper carries (None: nothing)."""
         if target_phrases is not None:
             target_phrases = tuple(target_phrases)
-            if self.policy_config.obs_type == "objects" and len(target_phrases) != len(self.policy_config.object_names):
+            if self.policy_config.observation.object_slots and \
+                    len(target_phrases) != len(self.policy_config.object_names):
                 raise ValueError(f"the policy has {len(self.policy_config.object_names)} object slots but "
                                  f"{len(target_phrases)} target phrases were given: {target_phrases}")
             self.target_phrases = target_phrases
@@ -348,17 +351,7 @@ class PolicyRunner:
 
     # ---- observations ------------------------------------------------------------------------
     def _default_visual(self, frame: RGBDFrame) -> np.ndarray:
-        pc = self.policy_config
-        if pc.obs_type == "objects":
-            return self.object_clouds(frame)
-        if pc.obs_type == "scene":
-            from lano3dp.perception.observer import scene_cloud
-
-            observer = self.observer
-            low = None if observer is None else observer.crop_low
-            high = None if observer is None else observer.crop_high
-            return scene_cloud(frame, n_points=pc.scene_points, crop_low=low, crop_high=high)
-        return resize_rgb(frame.rgb, pc.image_size)
+        return self.policy_config.observation.runtime_input(self, frame)
 
     def object_clouds(self, frame: RGBDFrame) -> np.ndarray:
         """(K, N, 3) target clouds in slot order.

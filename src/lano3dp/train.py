@@ -203,19 +203,20 @@ def checkpoint_progress(checkpoint: Path) -> dict:
 
 
 def policy_config_for_dataset(data: str | Path, **overrides) -> PolicyConfig:
-    """The default PolicyConfig for a dataset: slots from its object_names, n_points from its clouds."""
+    """The default PolicyConfig for a dataset: slots from its object_names, and what each registered observation
+    type reads off its key's recorded shape (n_points from the object clouds, scene_points, image_size)."""
+    from lano3dp.policy.observations import get_observation_type, observation_type_names
+
     store = EpisodeStore.open(data)
     fields: dict[str, Any] = {}
     names = store.attrs.get("object_names")
     if names:
         fields["object_names"] = tuple(names)
     shapes = _step_shapes(store)
-    if "object_clouds" in shapes:
-        fields["n_points"] = shapes["object_clouds"][1]
-    if "scene_cloud" in shapes:
-        fields["scene_points"] = shapes["scene_cloud"][0]
-    if "rgb" in shapes:
-        fields["image_size"] = shapes["rgb"][0]
+    for name in observation_type_names():
+        observation = get_observation_type(name)
+        if observation.key in shapes:
+            fields |= observation.dataset_fields(shapes[observation.key])
     fields["extra"] = {key: store.attrs[key] for key in ("skill", "task") if key in store.attrs}
     # How the observations were made travels with the policy, so a checkpoint acts without its dataset.
     fields["extra"]["observation"] = observation_settings(store.attrs)
@@ -433,25 +434,22 @@ class Trainer:
         if missing:
             raise TrainingConfigError(f"{store.path} has no {missing} (keys: {store.keys}); a "
                                       f"{policy_config.obs_type!r} policy needs {[*policy_config.obs_keys, 'action']}")
-        if policy_config.obs_type == "objects":
+        observation = policy_config.observation
+        if observation.object_slots:
             names = store.attrs.get("object_names")
             if names is not None and tuple(names) != policy_config.object_names:
                 raise TrainingConfigError(f"{store.path} stores object slots {names}, the policy expects "
                                           f"{list(policy_config.object_names)}")
-            slots = _step_shapes(store)["object_clouds"][0]
+            slots = _step_shapes(store)[policy_config.visual_key][0]
             if slots != policy_config.n_slots:
                 raise TrainingConfigError(f"{store.path} has {slots} object slots, the policy {policy_config.n_slots}")
-        if policy_config.obs_type != "image":
+        wanted = observation.cloud_points(policy_config)
+        if wanted is not None:
             stored = _step_shapes(store)[policy_config.visual_key][-2]
-            wanted = self._points_per_cloud(policy_config)
             if wanted > stored:
                 raise TrainingConfigError(f"{store.path} holds {stored} points per cloud, the policy asks for "
                                           f"{wanted}; record the dataset with more points or lower n_points")
             self.subsample_points = wanted if wanted < stored else None
-
-    @staticmethod
-    def _points_per_cloud(policy_config: PolicyConfig) -> int:
-        return policy_config.n_points if policy_config.obs_type == "objects" else policy_config.scene_points
 
     def _subsample(self, batch: dict, generator: torch.Generator) -> dict:
         """Keep a random subset of n_points points of every cloud (one index set per batch).
@@ -466,6 +464,11 @@ class Trainer:
         clouds = batch["obs"][key]
         keep = torch.randperm(clouds.shape[-2], generator=generator, device=generator.device)[: self.subsample_points]
         return {**batch, "obs": {**batch["obs"], key: clouds.index_select(-2, keep.to(clouds.device))}}
+
+    def _moved_key(self) -> str | None:
+        """The visual key augmentation moves with the scene: an xyz cloud input's, None for another (an image)."""
+        policy_config = self.policy.config
+        return policy_config.visual_key if policy_config.observation.cloud_points(policy_config) is not None else None
 
     @staticmethod
     def _load_weights(module: torch.nn.Module, weights: dict, path: Path) -> None:
@@ -527,7 +530,7 @@ class Trainer:
                     generator.manual_seed(_noise_seed(config.seed, self.rank, self.step))
                     batch = self._subsample(batch, generator)
                     if config.augment is not None:
-                        batch = augment_batch(batch, self.policy.config.visual_key, config.augment, generator)
+                        batch = augment_batch(batch, self._moved_key(), config.augment, generator)
                     with autocast:
                         loss = self.model(batch, generator=generator)
                     self.optimizer.zero_grad(set_to_none=True)

@@ -120,6 +120,17 @@ def obstacle_shape(name: str, option: str = "--obstacle-shape") -> str:
     return name
 
 
+def obs_type(name: str, option: str = "--obs-type") -> str:
+    """A registered observation type (`lano3dp.policy.observations`), as a usage error naming the registered ones."""
+    from lano3dp.policy.observations import UnknownObservationTypeError, get_observation_type
+
+    try:
+        get_observation_type(name)
+    except UnknownObservationTypeError as error:
+        raise typer.BadParameter(str(error), param_hint=option) from None
+    return name
+
+
 ENV_HELP = ("Your own simulator or robot: module:factory or path/to/file.py:factory, called with task, seed, "
             "variation, image_size, render_rgb, max_steps (those it names) and returning an env meeting "
             "lano3dp.sim.protocol (default: the built-in simulator).")

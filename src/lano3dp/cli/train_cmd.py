@@ -19,12 +19,6 @@ class Size(StrEnum):
     dp = "dp"
 
 
-class ObsType(StrEnum):
-    objects = "objects"
-    scene = "scene"
-    image = "image"
-
-
 class Encoder(StrEnum):
     residual = "residual"
     mlp = "mlp"
@@ -43,8 +37,9 @@ def train_command(
                                                     "this budget or --steps does, whichever comes first."),
     size: Size = typer.Option(Size.compact, help="UNet widths: compact (48,96,192), small (64,128,256), "
                                                  "medium (128,256,512), dp (256,512,1024)."),
-    obs_type: ObsType = typer.Option(ObsType.objects, "--obs-type",
-                                     help="objects (Lan-o3dp), scene (DP3 baseline) or image (DP baseline)."),
+    obs_type: str = typer.Option("objects", "--obs-type",
+                                 help="objects (Lan-o3dp), scene (DP3 baseline), image (DP baseline), or another "
+                                      "registered observation type (lano3dp.policy.register_observation_type)."),
     encoder: Encoder = typer.Option(Encoder.residual, help="Point encoder: residual (paper's best) or mlp (DP3)."),
     n_points: int | None = typer.Option(None, "--n-points", help="Points per object cloud to train on (default: "
                                                                  "all the dataset holds; fewer trains faster)."),
@@ -86,8 +81,9 @@ def train_command(
     _options.existing_path(data, "--data")
     _options.output_path(out, folder=True)
     _options.device(device)
+    _options.obs_type(obs_type)
     # errors past here (a dataset that does not fit, a refused resume) are one line via the CLI's error boundary
-    overrides = dict(obs_type=obs_type.value, point_encoder=encoder.value, down_dims=down_dims_for(size.value),
+    overrides = dict(obs_type=obs_type, point_encoder=encoder.value, down_dims=down_dims_for(size.value),
                      horizon=horizon, n_obs_steps=n_obs_steps, n_action_steps=n_action_steps)
     if pose_features:
         overrides["object_pose_features"] = True

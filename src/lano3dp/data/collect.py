@@ -16,6 +16,9 @@ or obs rgb/depth/intrinsics/cam_to_world), and success from `info["success"]`. R
                                     `SimOracleSegmenter` (phrases: info["target_phrases"][slot], else the slot)
     scene_cloud     (512, 3)        cropped scene above the table height (DP3 baseline)
     rgb             (96, 96, 3)     uint8 (Diffusion Policy baseline)
+    ...                             the key of any other observation type registered before collecting
+
+Each observation key is recorded by its observation type's module (`lano3dp.policy.observations`).
 
 Only successful expert episodes are kept. Recording goes on for `follow_through_s` seconds after the step
 info["success"] first becomes true (the expert's own follow-through: the cap pulled on past the 3 cm that
@@ -55,7 +58,7 @@ import numpy as np
 
 from lano3dp.data.store import EpisodeStore
 from lano3dp.errors import Lano3dpError
-from lano3dp.geometry.frame import observe, resize_rgb
+from lano3dp.geometry.frame import observe
 
 SEED_STRIDE = 100_003  # fallback seeds of episode i: seed + i + k * SEED_STRIDE (k = 0, 1, ...)
 MAX_TRIES = 5          # seeds tried per episode before giving up
@@ -386,7 +389,7 @@ def record_episode(env, observer, seed: int, config: CollectConfig, expert: Call
                    source: _Source | None = None) -> tuple[dict[str, np.ndarray] | None, int, dict | None]:
     """Run the expert on `seed`; the episode's arrays if it succeeded, else None. Also the held-cloud count
     and the camera of the last frame (`PinholeCamera.to_dict()`)."""
-    from lano3dp.perception import PerceptionError, scene_cloud
+    from lano3dp.policy.observations import RecordContext, UnrecordableEpisode, held_frames, recorders
 
     expert = OpenLoopPlan() if expert is None else expert
     source = _Source.of(env, "the env", config) if source is None else source
@@ -395,9 +398,9 @@ def record_episode(env, observer, seed: int, config: CollectConfig, expert: Call
         expert.reset(env, obs, info)
     named = info.get("target_phrases") or {}
     phrases = [named.get(slot, source.phrases[slot]) for slot in source.slots]
-    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("action", "state", "object_clouds", "scene_cloud", "rgb")}
-    last_clouds: list[np.ndarray | None] = [None] * len(phrases)
-    held = 0
+    # every registered observation type's input: the built-in ones, and a user's registered before collecting
+    record = recorders(RecordContext(observer, tuple(phrases), config))
+    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("action", "state", *record)}
     follow_steps = int(round(config.follow_through_s * source.control_hz))
     first_success = last_success = None  # step indices
     noise = DartNoise(config.dart_noise, seed, getattr(expert, "actions", None), source.control_hz)
@@ -405,28 +408,17 @@ def record_episode(env, observer, seed: int, config: CollectConfig, expert: Call
     for t in range(source.max_steps + follow_steps):
         frame, state = observe(env, obs)
         try:
-            clouds = list(observer.observe(frame, phrases).points)
-        except PerceptionError:  # some slot is occluded: hold its last cloud
-            clouds = []
-            for k, phrase in enumerate(phrases):
-                try:
-                    clouds.append(observer.observe(frame, [phrase]).points[0])
-                except PerceptionError:
-                    if last_clouds[k] is None:
-                        return None, 0, None
-                    clouds.append(last_clouds[k])
-                    held += 1
-        last_clouds = clouds
+            visual = {key: recorder(frame) for key, recorder in record.items()}
+        except UnrecordableEpisode:  # e.g. a slot out of view in the first frame
+            return None, 0, None
         action = np.asarray(expert(env, obs, info), dtype=np.float32)
         if action.shape != (10,):
             raise CollectionError(f"the expert returned an action of shape {action.shape}; it must be (10,): "
                                   "position (m), rotation 6D, gripper (0 open .. 1 closed), absolute")
         rows["action"].append(action)
         rows["state"].append(state)
-        rows["object_clouds"].append(np.stack(clouds))
-        rows["scene_cloud"].append(scene_cloud(frame, config.scene_points, config.crop_low, config.crop_high,
-                                               table_height=config.table_height))
-        rows["rgb"].append(resize_rgb(frame.rgb, config.rgb_size))
+        for key, value in visual.items():
+            rows[key].append(value)
         obs, _, terminated, truncated, info = env.step(noise.perturb(action, t))
         if info.get("success"):
             first_success = t if first_success is None else first_success
@@ -439,11 +431,11 @@ def record_episode(env, observer, seed: int, config: CollectConfig, expert: Call
     if first_success is None:
         return None, 0, None
     episode = {key: np.stack(values[:last_success + 1]) for key, values in rows.items()}
-    for key in ("action", "state", "object_clouds", "scene_cloud"):
+    for key in ("action", "state"):
         episode[key] = episode[key].astype(np.float32)
     camera = getattr(getattr(env, "env", env), "camera", None)
     camera = camera if hasattr(camera, "to_dict") else frame.camera
-    return episode, held, camera.to_dict()
+    return episode, held_frames(record), camera.to_dict()
 
 
 class DartNoise:

@@ -78,10 +78,10 @@ def train_command(
     from lano3dp.policy import down_dims_for
     from lano3dp.train import TrainConfig, policy_config_for_dataset, train
 
+    _options.obs_type(obs_type)
     _options.existing_path(data, "--data")
     _options.output_path(out, folder=True)
     _options.device(device)
-    _options.obs_type(obs_type)
     # errors past here (a dataset that does not fit, a refused resume) are one line via the CLI's error boundary
     overrides = dict(obs_type=obs_type, point_encoder=encoder.value, down_dims=down_dims_for(size.value),
                      horizon=horizon, n_obs_steps=n_obs_steps, n_action_steps=n_action_steps)

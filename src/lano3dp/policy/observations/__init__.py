@@ -23,9 +23,9 @@ subclass and one call, from any module imported before a policy of it is built o
 Evaluation with workers > 1 sends a registered type to its spawned worker processes pickled
 (`evaluate.observation_types_for_workers`), so its class must live at the top level of an importable module (the
 `--env` module is imported in the workers first). Other spawned processes (`executor` cells, `torchrun` ranks) run
-the user's script again, so register at its top level or in a module it imports, not under `if __name__ ==`. `lano3dp collect` records every registered type's key that has a
-recorder, so register a type before collecting the data it trains on. Modules of built-in types import torch only
-inside their methods: this package is imported by `PolicyConfig` itself.
+the user's script again, so register at its top level or in a module it imports, not under `if __name__ ==`.
+`lano3dp collect` records the key of every registered type that has a recorder, so register a type before
+collecting the data it trains on.
 """
 
 from __future__ import annotations

@@ -7,6 +7,7 @@ geometric augmentation (a moved scene would need a re-render).
 from __future__ import annotations
 
 from lano3dp.geometry.frame import resize_rgb
+from lano3dp.policy.encoders import ImageEncoder
 from lano3dp.policy.observations import ObservationType
 
 
@@ -15,8 +16,6 @@ class ImageObservation(ObservationType):
     needs_rgb = True
 
     def encoder(self, config):
-        from lano3dp.policy.encoders import ImageEncoder
-
         return ImageEncoder(config)
 
     def runtime_input(self, runner, frame):

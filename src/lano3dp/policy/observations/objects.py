@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from lano3dp.perception import PerceptionError
+from lano3dp.policy.encoders import ObjectCloudsEncoder
 from lano3dp.policy.observations import ObservationType, RecordContext, UnrecordableEpisode
 
 
@@ -21,8 +23,6 @@ class ObjectCloudsRecorder:
         self.held = 0
 
     def __call__(self, frame) -> np.ndarray:
-        from lano3dp.perception import PerceptionError
-
         try:
             clouds = list(self.observer.observe(frame, self.phrases).points)
         except PerceptionError:  # some slot is occluded: hold its last cloud
@@ -44,8 +44,6 @@ class ObjectCloudsObservation(ObservationType):
     object_slots = True
 
     def encoder(self, config):
-        from lano3dp.policy.encoders import ObjectCloudsEncoder
-
         return ObjectCloudsEncoder(config)
 
     def runtime_input(self, runner, frame):

@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+from lano3dp.perception import scene_cloud
+from lano3dp.policy.encoders import SceneCloudEncoder
 from lano3dp.policy.observations import ObservationType
 
 
@@ -10,21 +12,15 @@ class SceneCloudObservation(ObservationType):
     key = "scene_cloud"
 
     def encoder(self, config):
-        from lano3dp.policy.encoders import SceneCloudEncoder
-
         return SceneCloudEncoder(config)
 
     def runtime_input(self, runner, frame):
-        from lano3dp.perception.observer import scene_cloud
-
         observer = runner.observer  # its crop box is the one the dataset was recorded with
         low = None if observer is None else observer.crop_low
         high = None if observer is None else observer.crop_high
         return scene_cloud(frame, n_points=runner.policy_config.scene_points, crop_low=low, crop_high=high)
 
     def recorder(self, context):
-        from lano3dp.perception import scene_cloud
-
         s = context.settings
         return lambda frame: scene_cloud(frame, s.scene_points, s.crop_low, s.crop_high,
                                          table_height=s.table_height).astype("float32")

@@ -27,6 +27,7 @@ from typing import Any
 
 from lano3dp.errors import EmptyCloudError
 from lano3dp.guidance.exceptions import GuidanceError
+from lano3dp.guidance.settings import SAFETY_MARGIN
 
 OBSTACLE_COLOR = "tab:red"
 
@@ -182,7 +183,7 @@ def get_obstacle_shape(name: str) -> ObstacleShape:
     return shape
 
 
-def fit_obstacle(name: str, points, *, held_radius: float = 0.0, margin: float = 0.02, xy_only: bool = True):
+def fit_obstacle(name: str, points, *, held_radius: float = 0.0, margin: float = SAFETY_MARGIN, xy_only: bool = True):
     """Fit the shape registered as `name` to (N, 3) world points (m) and check what it returns.
 
     Raises:

@@ -151,7 +151,9 @@ def test_a_closed_loop_episode_guides_against_the_new_shape_and_reports_it(ball)
             return ActionChunk(trajectory[:, :4], trajectory)
 
     policy = StillPolicy()
-    config = RuntimeConfig(guidance=GuidanceConfig(mode="clean", scale=0.04), obstacle=ObstacleModel(shape="sphere"))
+    # the fitted shape's bare cost (no metric push: this policy has no normaliser; waypoints only)
+    config = RuntimeConfig(guidance=GuidanceConfig(mode="clean", scale=0.04), obstacle=ObstacleModel(shape="sphere"),
+                           metric_gradient=False, densify=1)
     runner = PolicyRunner(policy, ObjectObserver(SimOracleSegmenter(), n_points=32, min_points=5), config,
                           obstacle_phrases=["obstacle_0"])
     result = rollout(StillEnv(), runner, seed=0, max_steps=2)

@@ -139,7 +139,8 @@ _BUILTIN_BY_COST = {"Cylinder": "cylinder", "OrientedBox": "box", "PointCloudObs
 
 def register_obstacle_shape(name: str, shape, *, replace: bool = False) -> ObstacleShape:
     """Make `shape` (an ObstacleShape, or a class of one taking no arguments) available as `name`: to
-    `runtime.ObstacleModel(shape=name)`, `EvalConfig(obstacle_shape=name)` and `--obstacle-shape name`.
+    `runtime.ObstacleModel(shape=name)`, `ObstacleSettings(shape=name)` (in EvalConfig and RunConfig) and
+    `--obstacle-shape name`.
 
     Registering a name again with an object of the same class replaces it (a module imported twice); another
     class needs `replace=True`, so a plug-in cannot silently take over a built-in shape.

@@ -27,9 +27,11 @@ BODY_MODELS = ("swept", "sphere")
 @dataclass(frozen=True)
 class GuidanceSettings:
     """How chunks are guided. The defaults are the recommended preset: A_0|k cost on every DDIM step (S = 100
-    training steps covers all 10), an isotropic push of 4 cm per guided step on the path densified x4; in
-    results/bench_guidance.json (issue 3's sweep) DDIM-10 with these left 1% of sampled trajectories colliding
-    (2 cm: 12%). GUIDANCE_PRESETS["paper"] is the paper's form.
+    training steps covers all 10), an isotropic push of 4 cm per guided step on the path densified x4, every push
+    of the same weight and the scheduler's clipping; the closed-loop results (results/obstacles*.md) were made
+    with these. The synthetic sweep (results/bench_guidance.json, issue 3) has no row of them: its
+    nearest, DDIM-10 at rho 0.04 on every step with push_weight "alpha_bar" and guided_clip_range 3, left 1% of
+    sampled paths with a segment through the obstacle (2 cm: 19%). GUIDANCE_PRESETS["paper"] is the paper's form.
 
     Attributes:
         mode: "none", "noisy" (cost on A_k) or "clean" (the paper's A_0|k).
@@ -76,9 +78,10 @@ class GuidanceSettings:
 
 GUIDANCE_PRESETS: dict[str, GuidanceSettings] = {
     "recommended": GuidanceSettings(),
-    # The paper's Algorithm 1 as published: S = 10, the push in normalised units (rho 4 is the smallest that kept
-    # bench_guidance's synthetic paths clear), waypoints only. The paper also sampled with DDPM-100 and kept a
-    # ball of the held object's diameter clear: scheduler "ddpm", steps 100 and ObstacleSettings(body="sphere").
+    # The paper's Algorithm 1 as published: S = 10, the push in normalised units, waypoints only (rho 4 is the
+    # smallest with which bench_guidance's DDPM-100 waypoints cleared the obstacle, 1% colliding; the segments
+    # between them did not). The paper also sampled with DDPM-100 and kept a ball of the held object's diameter
+    # clear: add scheduler "ddpm", steps 100 and ObstacleSettings(body="sphere").
     "paper": GuidanceSettings(rho=4.0, last_steps=10, metric_gradient=False, densify=1),
 }
 

@@ -16,7 +16,8 @@ import lano3dp
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 PUBLIC = ("DiffusionPolicy", "PolicyConfig", "TabletopEnv", "SimulatorProtocol", "OfflineDecomposer", "LLMDecomposer",
-          "PolicyRunner", "rollout", "evaluate", "EvalConfig", "packaged_checkpoint", "run_instruction", "RunConfig")
+          "PolicyRunner", "rollout", "evaluate", "EvalConfig", "packaged_checkpoint", "run_instruction", "RunConfig",
+          "GuidanceSettings", "GUIDANCE_PRESETS", "ObstacleSettings", "PerceptionSettings")
 
 
 def readme_python_block(section: str = "## Use it from Python") -> str:

@@ -33,21 +33,23 @@ import shlex
 import sys
 import time
 from collections import Counter
+from dataclasses import asdict
 from pathlib import Path
 
-from lano3dp.evaluate import EvalConfig, write_json
+from lano3dp.evaluate import GUIDANCE_PRESETS, EvalConfig, write_json
 from lano3dp.pipeline import eval_stage
 from lano3dp.policy.pretrained import packaged_checkpoint
 from lano3dp.report import markdown_table, percent, wilson_interval
 
 ROOT = Path(__file__).resolve().parent.parent
+# EvalConfig fields of each sampler; a guidance mode alone is the recommended preset in that mode
 SAMPLERS = {
     "none": {"guidance": "none"},
     "A_k": {"guidance": "noisy"},
-    "paper": {"guidance": "clean", "scheduler": "ddpm", "steps": 100, "last_steps": 10, "metric_gradient": False,
-              "rho": 4.0, "densify": 1, "body": "sphere"},
+    "paper": {"guidance": asdict(GUIDANCE_PRESETS["paper"]), "scheduler": "ddpm", "steps": 100,
+              "obstacle": {"body": "sphere"}},
     "default": {"guidance": "clean"},
-    "sphere": {"guidance": "clean", "body": "sphere"},  # the default before the swept body: the ablation of it
+    "sphere": {"guidance": "clean", "obstacle": {"body": "sphere"}},  # the default before the swept body: its ablation
 }
 FAILURE_CLASSES = ("target not seen", "touched the obstacle", "grasp missed", "lost on the carry",
                    "last stage unfinished", "other")
@@ -144,10 +146,10 @@ def main(argv=None) -> int:
     def evaluate(task: str, variation: str, name: str, sampler: str) -> tuple[dict, list[dict]] | None:
         out = work / task / f"{name}.json"
         options = dict(SAMPLERS[sampler])
-        config = EvalConfig(checkpoint=policies.get(task) or str(packaged_checkpoint(task)), task=task, variation=variation,
-                            episodes=args.episodes, seed=args.seed, workers=args.workers, out=str(out),
-                            obstacle_scenes_only=variation != "clean", refit_obstacles="moving" in variation,
-                            **options)
+        obstacle = {**options.pop("obstacle", {}), "refit": "moving" in variation}
+        config = EvalConfig(checkpoint=policies.get(task) or str(packaged_checkpoint(task)), task=task,
+                            variation=variation, episodes=args.episodes, seed=args.seed, workers=args.workers,
+                            out=str(out), obstacle_scenes_only=variation != "clean", obstacle=obstacle, **options)
         if args.report_only:
             from lano3dp.pipeline import cached_eval
 

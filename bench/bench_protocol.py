@@ -54,7 +54,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lano3dp.evaluate import DEFAULT_LAST_STEPS, DEFAULT_RHO, EvalConfig, write_json
+from lano3dp.evaluate import GUIDANCE_PRESETS, EvalConfig, write_json
 from lano3dp.executor import (
     Cell,
     CellFailedError,
@@ -96,10 +96,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--obstacle-episodes", type=int, default=40,
                         help="episodes of the obstacle test (twice the default --episodes: only about 4 in 5 "
                              "layouts have room for an obstacle, and the guidance claim rests on this test)")
-    parser.add_argument("--rho", type=float, default=DEFAULT_RHO, help="guidance scale (metres per guided step)")
+    parser.add_argument("--rho", type=float, default=GUIDANCE_PRESETS["recommended"].rho,
+                        help="guidance scale (metres per guided step)")
     parser.add_argument("--rho-sweep", default="0.01,0.02", help="further guidance scales of the obstacle test, "
                                                                  "for its success/collision trade-off ('' none)")
-    parser.add_argument("--last-steps", type=int, default=DEFAULT_LAST_STEPS, help="guidance S")
+    parser.add_argument("--last-steps", type=int, default=GUIDANCE_PRESETS["recommended"].last_steps,
+                        help="guidance S")
     parser.add_argument("--batch-size", type=int, default=64)
     parser.add_argument("--lr", type=float, default=1e-3)
     parser.add_argument("--model", default="small", help="UNet size: small (5.4 M), medium (18 M), dp (67 M)")
@@ -190,8 +192,9 @@ def plan_runs(args: argparse.Namespace, overrides: Overrides = Overrides()) -> l
                 def config(step: int, variation: str, name: str, guidance: str = "none", episodes=None,
                            rho: float | None = None, folder=folder, evals_dir=evals_dir, task=task) -> EvalConfig:
                     fields = {"checkpoint": str(folder / "checkpoints" / checkpoint_name(step)), "task": task,
-                              "variation": variation, "episodes": episodes or args.episodes, "guidance": guidance,
-                              "rho": args.rho if rho is None else rho, "last_steps": args.last_steps,
+                              "variation": variation, "episodes": episodes or args.episodes,
+                              "guidance": {"mode": guidance, "rho": args.rho if rho is None else rho,
+                                           "last_steps": args.last_steps},
                               "workers": args.eval_workers, "out": str(evals_dir / f"{name}.json")}
                     return EvalConfig(**{**fields, **overrides.eval})
 

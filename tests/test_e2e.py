@@ -50,7 +50,7 @@ def test_eval_cli_writes_results_with_the_documented_fields(trained):
 
     assert data["command"].startswith(f"lano3dp eval --checkpoint {root / 'run'} --variation obstacle --episodes 1 ")
     assert "--guidance clean" in data["command"] and "--no-checked" not in data["command"]
-    assert data["config"]["task"] is None and data["config"]["guidance"] == "clean"
+    assert data["config"]["task"] is None and data["config"]["guidance"]["mode"] == "clean"
     assert data["checkpoint"] == str(checkpoint.resolve())
     assert data["policy"]["object_names"] == ["bowl", "pan"]
     assert set(SUMMARY_FIELDS) <= set(data["summary"])

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 import pytest
 
-from lano3dp.evaluate import EvalConfig, guidance_config, runtime_config, summarize, write_json
-from lano3dp.pipeline import eval_stage
+from lano3dp.evaluate import EvalConfig, runtime_config, summarize, write_json
+from lano3dp.guidance import GUIDANCE_PRESETS, GuidanceSettings, ObstacleSettings
+from lano3dp.pipeline import cached_eval, eval_stage
 from lano3dp.report import markdown_table, plot_rates, plot_top_view, wilson_interval
 
 
@@ -59,12 +60,15 @@ def test_markdown_table():
 
 
 def test_eval_config_to_guidance_and_runtime():
-    assert guidance_config(EvalConfig(checkpoint="c")) is None
-    config = EvalConfig(checkpoint="c", guidance="clean", rho=0.02, last_steps=100, checked=True, margin=0.03)
-    guidance = guidance_config(config)
-    assert guidance.mode == "clean" and guidance.scale == 0.02 and guidance.last_steps == 100
+    assert runtime_config(EvalConfig(checkpoint="c"), seed=0).guidance is None
+    config = EvalConfig(checkpoint="c", guidance=GuidanceSettings(rho=0.02, last_steps=100, checked=True,
+                                                                  guided_clip_range=3.0, push_weight="alpha_bar"),
+                        obstacle=ObstacleSettings(margin=0.03))
     runtime = runtime_config(config, seed=7)
-    assert runtime.seed == 7 and runtime.metric_gradient and runtime.checked is not None
+    guidance = runtime.guidance
+    assert guidance.mode == "clean" and guidance.scale == 0.02 and guidance.last_steps == 100
+    assert guidance.guided_clip_range == 3.0 and guidance.push_weight == "alpha_bar"
+    assert runtime.seed == 7 and runtime.metric_gradient and runtime.densify == 4 and runtime.checked is not None
     assert runtime.obstacle.margin == 0.03 and runtime.guided
     with pytest.raises(ValueError, match="guidance"):
         EvalConfig(checkpoint="c", guidance="sometimes")
@@ -80,6 +84,34 @@ def test_eval_stage_reuses_results_made_with_the_same_config(tmp_path):
     changed = EvalConfig(checkpoint=config.checkpoint, episodes=4, out=str(out))
     with pytest.raises(FileNotFoundError, match="no policy checkpoint"):
         eval_stage(changed)  # a different config is evaluated anew
+
+
+# A results config as saved before the settings were nested (bench/out work folders hold such files).
+FLAT_SAVED = {"checkpoint": "run", "task": "bowl_pour", "variation": "obstacle", "episodes": 3, "seed": 1_000_000,
+              "obstacles": None, "guidance": "clean", "rho": 4.0, "last_steps": 10, "per_train_step": False,
+              "metric_gradient": False, "densify": 1, "scheduler": "ddpm", "steps": 100, "checked": False,
+              "margin": 0.02, "held_radius": None, "n_action_steps": None, "max_steps": None, "image_size": None,
+              "workers": 2, "video_dir": None, "n_videos": 2, "out": None, "segmenter": "sim",
+              "detector": "grounding_dino", "detector_dir": None, "sam_dir": None, "env": None,
+              "obstacle_scenes_only": True, "refit_obstacles": False, "guide_when_needed": False,
+              "obstacle_shape": "cylinder"}  # no "body": saved before it existed, when guidance kept a sphere clear
+
+
+def test_results_saved_flat_before_the_settings_were_nested_are_read_into_them(tmp_path):
+    out = tmp_path / "paper.json"
+    saved = {"config": {**FLAT_SAVED, "out": str(out)}, "summary": {"success_rate": 0.25}}
+    write_json(out, saved)
+    paper = EvalConfig(checkpoint="run", task="bowl_pour", variation="obstacle", episodes=3,
+                       guidance=GUIDANCE_PRESETS["paper"], scheduler="ddpm", steps=100,
+                       obstacle=ObstacleSettings(body="sphere"), obstacle_scenes_only=True, out=str(out))
+    assert EvalConfig.from_dict(saved["config"]) == replace(paper, workers=2)
+    assert cached_eval(paper) == saved  # the same evaluation: reused
+    for changed in (replace(paper, guidance=replace(paper.guidance, rho=2.0)),
+                    replace(paper, obstacle=ObstacleSettings(body="swept")),  # today's default, not what was saved
+                    replace(paper, guidance=replace(paper.guidance, push_weight="alpha_bar"))):
+        assert cached_eval(changed) is None  # stale for another evaluation: it is run anew
+    write_json(out, {**saved, "config": {**saved["config"], "guidance": 7, "obstacle": "x"}})
+    assert cached_eval(paper) is None  # a saved config no EvalConfig could have written is not reused either
 
 
 def test_write_json_is_atomic_and_handles_numpy_and_infinity(tmp_path):

@@ -131,7 +131,7 @@ def test_a_type_defined_outside_the_package_is_recorded_trained_saved_and_acts(o
 
     # in the env through evaluate: the runner makes each step's input with the type's runtime_input
     results = evaluate(EvalConfig(checkpoint=str(final), env=ENV, episodes=1, max_steps=3, steps=2,
-                                  guidance="none", image_size=48))
+                                  guidance="none", perception={"image_size": 48}))
     (record,) = results["episodes"]
     assert results["policy"]["obs_type"] == "object_tops"
     assert record["error"] is None and record["steps"] == 3 and len(record["chunk_latency_s"]) >= 1

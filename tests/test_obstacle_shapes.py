@@ -5,6 +5,7 @@ built-in shapes keep their numbers; unknown names fail in one line naming the re
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 
 import matplotlib
 
@@ -21,6 +22,7 @@ from lano3dp.errors import EmptyCloudError  # noqa: E402
 from lano3dp.evaluate import EvalConfig, RunConfig, runtime_config, shapes_for_workers  # noqa: E402
 from lano3dp.guidance import (  # noqa: E402
     GuidanceConfig,
+    ObstacleSettings,
     ObstacleShape,
     Sphere,
     UnknownObstacleShapeError,
@@ -151,7 +153,9 @@ def test_a_closed_loop_episode_guides_against_the_new_shape_and_reports_it(ball)
             return ActionChunk(trajectory[:, :4], trajectory)
 
     policy = StillPolicy()
-    config = RuntimeConfig(guidance=GuidanceConfig(mode="clean", scale=0.04), obstacle=ObstacleModel(shape="sphere"))
+    # the fitted shape's bare cost (no metric push: this policy has no normaliser; waypoints only)
+    config = RuntimeConfig(guidance=GuidanceConfig(mode="clean", scale=0.04), obstacle=ObstacleModel(shape="sphere"),
+                           metric_gradient=False, densify=1)
     runner = PolicyRunner(policy, ObjectObserver(SimOracleSegmenter(), n_points=32, min_points=5), config,
                           obstacle_phrases=["obstacle_0"])
     result = rollout(StillEnv(), runner, seed=0, max_steps=2)
@@ -167,9 +171,9 @@ def test_a_closed_loop_episode_guides_against_the_new_shape_and_reports_it(ball)
 
 
 def test_the_configs_and_the_command_line_take_a_registered_shape(ball, tmp_path):
-    config = EvalConfig(checkpoint="run", obstacle_shape="sphere")
+    config = EvalConfig(checkpoint="run", obstacle=ObstacleSettings(shape="sphere"))
     assert runtime_config(config, 0).obstacle.shape == "sphere"
-    assert RunConfig("pour the bowl into the pan", obstacle_shape="sphere").obstacle_shape == "sphere"
+    assert RunConfig("pour the bowl into the pan", obstacle={"shape": "sphere"}).obstacle.shape == "sphere"
     assert shapes_for_workers("cylinder") == {}
     runner = CliRunner()
     for command in (["eval", "--task", "bowl_pour"], ["run", "pour the bowl into the pan"]):
@@ -222,7 +226,7 @@ def test_unknown_shapes_fail_in_one_line_naming_the_registered_ones():
                                                         r"points$"):
         ObstacleModel(shape="cone")
     with pytest.raises(ValueError, match="unknown obstacle shape 'cone'"):
-        EvalConfig(checkpoint="run", obstacle_shape="cone")
+        EvalConfig(checkpoint="run", obstacle=ObstacleSettings(shape="cone"))
     for command in (["eval", "--task", "bowl_pour"], ["run", "pour the bowl into the pan"]):
         result = CliRunner().invoke(app, [*command, "--obstacle-shape", "cone"])
         assert result.exit_code == 2
@@ -285,14 +289,15 @@ def test_results_saved_before_shapes_were_named_are_described_and_drawn_as_befor
 def test_an_episode_log_from_before_the_obstacle_shape_field_still_resumes(tmp_path):
     from lano3dp.evaluate import EVAL_FIELDS_NOT_MEASURED, EpisodeLog
 
-    config = json.loads(json.dumps(EvalConfig(checkpoint="run", episodes=2).__dict__))
+    config = json.loads(json.dumps(asdict(EvalConfig(checkpoint="run", episodes=2))))
     for name in EVAL_FIELDS_NOT_MEASURED:
         config.pop(name)
     identity = {"config": config, "checkpoint": "run", "weights": "w"}
-    old = {**identity, "config": {k: v for k, v in config.items() if k != "obstacle_shape"}}
+    old_obstacle = {k: v for k, v in config["obstacle"].items() if k != "shape"}
+    old = {**identity, "config": {**config, "obstacle": old_obstacle}}
     path = tmp_path / "r.episodes.jsonl"
     path.write_text(json.dumps({"format": "lano3dp-eval-episodes", "evaluation": old}) + "\n"
                     + json.dumps({"index": 0, "episode": {"seed": 1}}) + "\n")
     assert EpisodeLog(path, identity).records == {0: {"seed": 1}}
-    other = {**identity, "config": {**config, "obstacle_shape": "box"}}
+    other = {**identity, "config": {**config, "obstacle": {**config["obstacle"], "shape": "box"}}}
     assert EpisodeLog(path, other).records == {}  # made with the cylinder: a box evaluation starts afresh

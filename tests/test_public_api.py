@@ -16,7 +16,8 @@ import lano3dp
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 PUBLIC = ("DiffusionPolicy", "PolicyConfig", "TabletopEnv", "SimulatorProtocol", "OfflineDecomposer", "LLMDecomposer",
-          "PolicyRunner", "rollout", "evaluate", "EvalConfig", "packaged_checkpoint", "run_instruction", "RunConfig")
+          "PolicyRunner", "rollout", "evaluate", "EvalConfig", "packaged_checkpoint", "run_instruction", "RunConfig",
+          "GuidanceSettings", "GUIDANCE_PRESETS", "ObstacleSettings", "PerceptionSettings")
 
 
 def readme_python_block(section: str = "## Use it from Python") -> str:
@@ -91,4 +92,4 @@ def test_the_readme_python_example_runs_on_a_packaged_policy(tmp_path, monkeypat
     assert json.loads((tmp_path / "run_out" / "run.json").read_text())["plan"]["skill"] == "put_item_in_drawer"
     assert run["episodes"]["guided"]["steps"] <= 40 and isinstance(run["episodes"]["guided"]["success"], bool)
     assert run["obstacles"]  # the mug is not in the simulator: its obstacle stands in, and guidance has a cost
-    assert report["summary"]["episodes"] == 3 and report["config"]["guidance"] == "clean"
+    assert report["summary"]["episodes"] == 3 and report["config"]["guidance"]["mode"] == "clean"

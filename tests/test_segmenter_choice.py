@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import json
+from dataclasses import asdict
 
 import pytest
 from typer.testing import CliRunner
 
 from lano3dp.cli import app
-from lano3dp.evaluate import EpisodeRunner, EvalConfig, RunConfig, run_instruction
+from lano3dp.evaluate import EpisodeRunner, EvalConfig, PerceptionSettings, RunConfig, run_instruction
 from lano3dp.perception import SimOracleSegmenter, factory
 from lano3dp.pipeline import cached_eval
 from test_public_api import write_tiny_packaged_policy
@@ -53,9 +54,9 @@ def built(monkeypatch):
 
 def test_evaluation_segments_with_what_the_factory_builds_for_open_vocab(checkpoint, built, tmp_path):
     configs, segmenters = built
-    runner = EpisodeRunner(EvalConfig(checkpoint=str(checkpoint), segmenter="open-vocab", detector="owlv2",
-                                      detector_dir=str(tmp_path / "owlv2"), sam_dir=str(tmp_path / "sam"),
-                                      episodes=1, max_steps=2))
+    perception = PerceptionSettings(segmenter="open-vocab", detector="owlv2", detector_dir=tmp_path / "owlv2",
+                                    sam_dir=str(tmp_path / "sam"))
+    runner = EpisodeRunner(EvalConfig(checkpoint=str(checkpoint), perception=perception, episodes=1, max_steps=2))
     assert [(c.kind, c.detector, c.detector_dir.name, c.sam_dir.name) for c in configs] == \
         [("open_vocab", "owlv2", "owlv2", "sam")]
     assert runner.observer.segmenter is segmenters[0]
@@ -73,7 +74,8 @@ def test_the_default_is_the_simulators_ground_truth_through_the_factory(checkpoi
 def test_run_perceives_targets_and_obstacles_with_the_chosen_segmenter(checkpoint, built, tmp_path):
     configs, segmenters = built
     run_instruction(RunConfig("put the block in the drawer and keep clear of the mug", checkpoint=str(checkpoint),
-                              segmenter="open-vocab", detector_dir=str(tmp_path), sam_dir=str(tmp_path),
+                              perception={"segmenter": "open-vocab", "detector_dir": str(tmp_path),
+                                          "sam_dir": str(tmp_path)},
                               max_steps=2, out=str(tmp_path / "run")), log=lambda line: None)
     assert [c.kind for c in configs] == ["open_vocab"]
     assert {"block", "drawer", "obstacle_0"} <= set(segmenters[0].phrases)  # the mug's stand-in in the sim
@@ -97,19 +99,22 @@ def test_cli_open_vocab_reaches_the_factory_which_refuses_empty_weight_folders(c
 
 def test_an_unknown_segmenter_is_refused_by_name():
     with pytest.raises(ValueError, match="segmenter must be one of sim, open-vocab, got 'sam'"):
-        EvalConfig(checkpoint="x", segmenter="sam")
+        EvalConfig(checkpoint="x", perception=PerceptionSettings(segmenter="sam"))
     result = CliRunner().invoke(app, ["eval", "--task", "bowl_pour", "--segmenter", "sam"])
     assert result.exit_code == 2 and "'sam' is not one of sim, open-vocab" in result.output
 
 
 def test_results_cached_before_the_segmenter_option_still_count_as_up_to_date(tmp_path):
     config = EvalConfig(checkpoint="run", task="bowl_pour", episodes=2, out=str(tmp_path / "r.json"))
-    old = {key: value for key, value in json.loads(json.dumps(config.__dict__)).items()
-           if key not in ("segmenter", "detector", "detector_dir", "sam_dir")}
+    old = {"checkpoint": "run", "task": "bowl_pour", "variation": "clean", "episodes": 2, "seed": 1_000_000,
+           "obstacles": None, "guidance": "none", "rho": 0.04, "last_steps": 100, "per_train_step": False,
+           "metric_gradient": True, "densify": 4, "scheduler": None, "steps": None, "checked": False, "margin": 0.02,
+           "held_radius": None, "n_action_steps": None, "max_steps": None, "image_size": None, "workers": 1,
+           "video_dir": None, "n_videos": 2, "out": config.out, "body": "swept"}  # flat, as saved then
     (tmp_path / "r.json").write_text(json.dumps({"config": old, "summary": {"episodes": 2}}))
     assert cached_eval(config) == {"config": old, "summary": {"episodes": 2}}
     other = EvalConfig(checkpoint="run", task="bowl_pour", episodes=2, out=str(tmp_path / "r.json"),
-                       segmenter="open-vocab", detector_dir="d", sam_dir="s")
+                       perception=PerceptionSettings(segmenter="open-vocab", detector_dir="d", sam_dir="s"))
     assert cached_eval(other) is None  # made with the simulator's masks, not open-vocab: re-run
 
 
@@ -122,7 +127,7 @@ def test_results_older_than_the_checkpoint_weights_are_not_reused(tmp_path):
     (checkpoint / "config.json").write_text("{}")
     (checkpoint / "model.safetensors").write_bytes(b"old weights")
     config = EvalConfig(checkpoint=str(checkpoint), task="bowl_pour", episodes=2, out=str(tmp_path / "r.json"))
-    saved = {"config": json.loads(json.dumps(config.__dict__)), "summary": {"episodes": 2}}
+    saved = {"config": json.loads(json.dumps(asdict(config))), "summary": {"episodes": 2}}
     (tmp_path / "r.json").write_text(json.dumps(saved))
     os.utime(checkpoint / "model.safetensors", (1_000_000, 1_000_000))
     assert cached_eval(config) == saved

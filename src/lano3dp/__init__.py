@@ -7,7 +7,8 @@ The public API, importable from here (see the README's "Use it from Python"):
 - environment: SimulatorProtocol (what any simulator or robot meets), TabletopEnv (the built-in one);
 - planner: OfflineDecomposer, LLMDecomposer (instruction -> TaskPlan);
 - runner: PolicyRunner (perception + guided policy, one action per frame), rollout (one episode);
-- evaluation: evaluate + EvalConfig (as `lano3dp eval`), run_instruction + RunConfig (as `lano3dp run`).
+- evaluation: evaluate + EvalConfig (as `lano3dp eval`), run_instruction + RunConfig (as `lano3dp run`), and the
+  settings they nest: GuidanceSettings (GUIDANCE_PRESETS), ObstacleSettings, PerceptionSettings.
 
 Names are imported on first use (module __getattr__), so `import lano3dp` stays light: no torch, no MuJoCo.
 """
@@ -34,14 +35,20 @@ _EXPORTS = {
     "EvalConfig": "lano3dp.evaluate",
     "run_instruction": "lano3dp.evaluate",
     "RunConfig": "lano3dp.evaluate",
+    "PerceptionSettings": "lano3dp.evaluate",
+    "GuidanceSettings": "lano3dp.guidance.settings",
+    "GUIDANCE_PRESETS": "lano3dp.guidance.settings",
+    "ObstacleSettings": "lano3dp.guidance.settings",
 }
 
-__all__ = ["DiffusionPolicy", "EvalConfig", "LLMDecomposer", "OfflineDecomposer", "PolicyConfig", "PolicyRunner",
-           "RunConfig", "SimulatorProtocol", "TabletopEnv", "__version__", "evaluate", "packaged_checkpoint",
-           "rollout", "run_instruction"]  # literal, so linters see it; test_public_api checks it against _EXPORTS
+__all__ = ["GUIDANCE_PRESETS", "DiffusionPolicy", "EvalConfig", "GuidanceSettings", "LLMDecomposer", "ObstacleSettings",
+           "OfflineDecomposer", "PerceptionSettings", "PolicyConfig", "PolicyRunner", "RunConfig", "SimulatorProtocol",
+           "TabletopEnv", "__version__", "evaluate", "packaged_checkpoint", "rollout",
+           "run_instruction"]  # literal, so linters see it; test_public_api checks it against _EXPORTS
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports on demand
-    from lano3dp.evaluate import EvalConfig, RunConfig, evaluate, run_instruction
+    from lano3dp.evaluate import EvalConfig, PerceptionSettings, RunConfig, evaluate, run_instruction
+    from lano3dp.guidance.settings import GUIDANCE_PRESETS, GuidanceSettings, ObstacleSettings
     from lano3dp.language.llm import LLMDecomposer
     from lano3dp.language.offline import OfflineDecomposer
     from lano3dp.policy.config import PolicyConfig

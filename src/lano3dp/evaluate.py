@@ -1,7 +1,7 @@
 """Closed-loop evaluation of a checkpoint in the simulator: many episodes, in parallel, to one JSON.
 
     result = evaluate(EvalConfig(checkpoint="runs/bowl", task="bowl_pour", variation="obstacle",
-                                 episodes=20, guidance="clean", rho=0.5))
+                                 episodes=20, guidance=GuidanceSettings(rho=0.02)))
     result["summary"]["success_rate"], result["summary"]["collision_rate"]
     result["summary"]["stage_rates"]   # e.g. {"reached_handle": 0.9, "grasped_handle": 0.6, ..., "opened": 0.4}
 
@@ -17,9 +17,9 @@ named 'module:factory' or 'path/to/file.py:factory' (`lano3dp.env_factory`: what
 the env must return, and what degrades when the env is not the simulator); both are built by
 `env_factory.make_env`.
 
-Perception is built by `perception.factory.build_segmenter` from `segmenter`: the simulator's ground-truth
-masks by default ("sim"), or the paper's open-vocabulary detector + SAM ("open-vocab"); targets are named by
-the phrases the scene uses (e.g. "blue bowl" among look-alikes) and obstacles, by default, are the
+Perception is built by `perception.factory.build_segmenter` from `perception.segmenter`: the simulator's
+ground-truth masks by default ("sim"), or the paper's open-vocabulary detector + SAM ("open-vocab"); targets are
+named by the phrases the scene uses (e.g. "blue bowl" among look-alikes) and obstacles, by default, are the
 objects the scene marks as obstacles. Crop box and image size follow the dataset the checkpoint was
 trained on (found through its train_config.json) and points per cloud follow the policy's config, so
 evaluation sees what training saw.
@@ -35,8 +35,8 @@ import shlex
 import sys
 import time
 import types
-from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field, fields, replace
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -45,22 +45,65 @@ import numpy as np
 
 from lano3dp import env_factory
 from lano3dp.errors import Lano3dpError
+from lano3dp.guidance.settings import GUIDANCE_PRESETS, GuidanceSettings, ObstacleSettings  # noqa: F401 (re-export)
 
 DEFAULT_EVAL_SEED = 1_000_000
-# Guidance defaults: A_0|k cost on every DDIM step (S = 100 training steps covers all 10), isotropic metric push
-# of 4 cm per guided step on the densified path: in results/bench_guidance.json (issue 3's sweep) DDIM-10 with
-# these settings left 1% of sampled trajectories colliding (2 cm: 12%). The paper's setting (DDPM-100, S = 10,
-# push in normalised units: --paper-push) stays available.
-DEFAULT_RHO = 0.04
-DEFAULT_DENSIFY = 4
-DEFAULT_LAST_STEPS = 100
 SUMMARY_FIELDS = ("episodes", "success_rate", "collision_rate", "safe_success_rate", "error_rate",
                   "mean_min_clearance", "mean_path_length", "mean_steps", "latency_mean_s", "latency_p95_s")
 
 
+@dataclass(frozen=True)
+class PerceptionSettings:
+    """How targets and obstacles are seen.
+
+    Attributes:
+        segmenter: "sim" (the simulator's ground-truth masks) or "open-vocab" (detector + SAM, the paper's
+            perception; needs detector_dir and sam_dir, local weight folders, never downloaded).
+        detector: "grounding_dino" or "owlv2" (open-vocab).
+        detector_dir, sam_dir: (open-vocab) the weight folders.
+        image_size: camera resolution (None: the dataset's the checkpoint was trained on).
+    """
+
+    segmenter: str = "sim"
+    detector: str = "grounding_dino"
+    detector_dir: str | None = None
+    sam_dir: str | None = None
+    image_size: int | None = None
+
+    def __post_init__(self):
+        check_segmenter_choice(self.segmenter)
+        for name in ("detector_dir", "sam_dir"):  # a Path is saved as its text, so results stay JSON
+            value = getattr(self, name)
+            object.__setattr__(self, name, None if value is None else str(value))
+
+
+# The nested sections of EvalConfig and RunConfig: field -> its type. A section may be given as a dict (a saved
+# config read back), and `guidance` as a mode name alone, meaning the recommended preset in that mode.
+_SECTIONS = {"guidance": GuidanceSettings, "obstacle": ObstacleSettings, "perception": PerceptionSettings}
+
+
+def _build_sections(config) -> None:
+    for name, kind in _SECTIONS.items():
+        value = getattr(config, name)
+        if isinstance(value, str) and kind is GuidanceSettings:
+            value = GuidanceSettings(mode=value)
+        elif isinstance(value, Mapping):
+            value = kind(**value)
+        elif not isinstance(value, kind):
+            raise TypeError(f"{name} must be a {kind.__name__}, a dict of its fields"
+                            + (" or a mode name" if kind is GuidanceSettings else "") + f", got {value!r}")
+        setattr(config, name, value)
+
+
 @dataclass
 class EvalConfig:
-    """One evaluation (saved verbatim in the results JSON).
+    """One evaluation (saved verbatim in the results JSON; `from_dict` reads it back).
+
+        EvalConfig(checkpoint="runs/bowl", variation="obstacle", guidance="clean")   # the recommended guidance
+        EvalConfig(checkpoint="runs/bowl", variation="obstacle",
+                   guidance=GuidanceSettings(rho=0.02), obstacle=ObstacleSettings(shape="box"))
+        EvalConfig(..., guidance=GUIDANCE_PRESETS["paper"], scheduler="ddpm", steps=100,
+                   obstacle=ObstacleSettings(body="sphere"))                          # the paper's form
 
     Attributes:
         checkpoint: a policy folder or a training run (its checkpoints/last).
@@ -69,28 +112,16 @@ class EvalConfig:
         episodes: how many episodes; seeds are seed, seed + 1, ...
         seed: first episode seed (also seeds the sampling noise of each episode).
         obstacles: phrases of the objects to avoid; None = every object the scene marks as an obstacle.
-        guidance: "none", "noisy" (cost on A_k) or "clean" (the paper's A_0|k).
-        rho, last_steps, per_train_step: the guidance scale, S, and whether rho is scaled by the scheduler stride.
-        metric_gradient: push isotropically in metres (rho = metres per guided step; `guidance.MetricGradient`);
-            False is the paper's push, in the normaliser's units (rho then needs to be far larger).
-        densify: points per segment the cost and the check see (1: waypoints only, as the paper).
+        guidance: how chunks are guided (`guidance.GuidanceSettings`; its defaults are the recommended preset);
+            a mode name ("none", "noisy", "clean") is that preset in that mode. Default: mode "none".
+        obstacle: how obstacles become costs (`guidance.ObstacleSettings`: shape, margin, body, held radius,
+            re-fitting before every chunk; see `runtime.ObstacleModel`).
+        perception: segmenter, detector and its weights, camera resolution (`PerceptionSettings`).
         scheduler, steps: inference scheduler and its number of denoising steps (None: the policy's default).
-        checked: checked execution (re-sample with a larger rho while the executed part collides).
-        margin, held_radius: obstacle model; held_radius None measures it from the held object's cloud.
-        obstacle_scenes_only: with an obstacle variation, evaluate the first `episodes` seeds from `seed` whose
-            scene has room for every obstacle asked for (chosen from the layout alone, never from an outcome).
-        refit_obstacles: re-segment and re-fit the obstacles before every chunk (moving obstacles).
-        guide_when_needed: guide a chunk only when the policy's own one comes within the margin of an obstacle.
-        body: what guidance keeps clear: "swept" (hand and held object as balls re-measured every chunk) or
-            "sphere" (the paper: one ball of held_radius round the EE point); see `runtime.ObstacleModel`.
-        obstacle_shape: the registered shape fitted to each obstacle's points: "cylinder" (the paper), "box",
-            "points", or one registered with `lano3dp.guidance.register_obstacle_shape` (see `guidance.shapes`).
         n_action_steps: actions executed per chunk (None: the policy's).
         max_steps: episode step limit (None: the task's).
-        image_size: camera resolution (None: the dataset's).
-        segmenter: "sim" (the simulator's ground-truth masks) or "open-vocab" (detector + SAM, the paper's
-            perception; needs detector_dir and sam_dir, local weight folders, never downloaded).
-        detector: "grounding_dino" or "owlv2" (open-vocab).
+        obstacle_scenes_only: with an obstacle variation, evaluate the first `episodes` seeds from `seed` whose
+            scene has room for every obstacle asked for (chosen from the layout alone, never from an outcome).
         workers: parallel processes (1 runs in this process).
         video_dir, n_videos: write MP4s of the first n_videos episodes there.
         out: results JSON path (None: not written).
@@ -108,59 +139,35 @@ class EvalConfig:
     episodes: int = 20
     seed: int = DEFAULT_EVAL_SEED
     obstacles: list[str] | None = None
-    guidance: str = "none"
-    rho: float = DEFAULT_RHO
-    last_steps: int = DEFAULT_LAST_STEPS
-    per_train_step: bool = False
-    metric_gradient: bool = True
-    densify: int = DEFAULT_DENSIFY
+    guidance: GuidanceSettings = field(default_factory=lambda: GuidanceSettings(mode="none"))
+    obstacle: ObstacleSettings = field(default_factory=ObstacleSettings)
+    perception: PerceptionSettings = field(default_factory=PerceptionSettings)
     scheduler: str | None = None
     steps: int | None = None
-    checked: bool = False
-    margin: float = 0.02
-    held_radius: float | None = None
     n_action_steps: int | None = None
     max_steps: int | None = None
-    image_size: int | None = None
+    obstacle_scenes_only: bool = False
     workers: int = 1
     video_dir: str | None = None
     n_videos: int = 2
     out: str | None = None
-    # added after results were first cached: pipeline.cached_eval reads a missing field as its default
-    segmenter: str = "sim"
-    detector: str = "grounding_dino"
-    detector_dir: str | None = None
-    sam_dir: str | None = None
     env: str | None = None
-    body: str = "swept"
-    obstacle_scenes_only: bool = False
-    refit_obstacles: bool = False
-    guide_when_needed: bool = False
-    obstacle_shape: str = "cylinder"
 
     def __post_init__(self):
         self.checkpoint = str(self.checkpoint)
         self.env = env_spec(self.env)
+        _build_sections(self)
         if self.episodes < 1 or self.workers < 1:
             raise ValueError(f"episodes and workers must be >= 1, got {self.episodes}, {self.workers}")
-        if self.guidance not in ("none", "noisy", "clean"):
-            raise ValueError(f"guidance must be 'none', 'noisy' or 'clean', got {self.guidance!r}")
-        check_segmenter_choice(self.segmenter)
-        if self.body not in ("swept", "sphere"):
-            raise ValueError(f"body must be 'swept' or 'sphere', got {self.body!r}")
         if self.obstacle_scenes_only and self.env is not None:
             raise ValueError("obstacle_scenes_only picks seeds from the built-in simulator's layouts; "
                              "a user's env picks its own scenes")
-        if self.held_radius is not None and self.body != "sphere":
-            raise ValueError("a fixed held radius sizes the 'sphere' body model; add body='sphere' (--body sphere)")
-        check_obstacle_shape(self.obstacle_shape)
 
-
-def check_obstacle_shape(name: str) -> None:
-    """An unknown shape fails before any episode, naming the registered ones."""
-    from lano3dp.guidance.shapes import get_obstacle_shape
-
-    get_obstacle_shape(name)
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> EvalConfig:
+        """An EvalConfig from its saved dict (results JSON, episode log, executor cell): nested, or flat as
+        results were saved before the settings were nested (see `saved_config`)."""
+        return cls(**saved_config(data))
 
 
 def env_spec(env) -> str | None:
@@ -193,7 +200,7 @@ def check_segmenter_choice(segmenter: str) -> None:
 
 
 def build_config_segmenter(config):
-    """The segmenter an EvalConfig or RunConfig names, built by `perception.factory.build_segmenter`.
+    """The segmenter an EvalConfig's or RunConfig's perception names, built by `perception.factory.build_segmenter`.
 
     Raises:
         ValueError: open-vocab without its weight folders (named).
@@ -201,10 +208,11 @@ def build_config_segmenter(config):
     """
     from lano3dp.perception import factory
 
+    perception = config.perception
     return factory.build_segmenter(factory.SegmenterConfig(
-        kind=SEGMENTERS[config.segmenter], detector=config.detector,
-        detector_dir=Path(config.detector_dir) if config.detector_dir else None,
-        sam_dir=Path(config.sam_dir) if config.sam_dir else None))
+        kind=SEGMENTERS[perception.segmenter], detector=perception.detector,
+        detector_dir=Path(perception.detector_dir) if perception.detector_dir else None,
+        sam_dir=Path(perception.sam_dir) if perception.sam_dir else None))
 
 
 class PolicyTaskMismatchError(Lano3dpError, ValueError):
@@ -259,27 +267,13 @@ def check_task_matches_policy(task: str, policy_config) -> None:
             f"{policy_config.extra.get('task') or trained_skill}")
 
 
-def guidance_config(config: EvalConfig):
-    from lano3dp.guidance import GuidanceConfig
-
-    if config.guidance == "none":
-        return None
-    return GuidanceConfig(mode=config.guidance, scale=config.rho, last_steps=config.last_steps,
-                          per_train_step=config.per_train_step)
-
-
 def runtime_config(config: EvalConfig, seed: int):
-    from lano3dp.guidance import CheckConfig
-    from lano3dp.runtime import ObstacleModel, RuntimeConfig
+    """The runner's config for one episode of this evaluation."""
+    from lano3dp.runtime import RuntimeConfig
 
-    return RuntimeConfig(
-        guidance=guidance_config(config), scheduler=config.scheduler, num_inference_steps=config.steps,
-        n_action_steps=config.n_action_steps,
-        obstacle=ObstacleModel(shape=config.obstacle_shape, margin=config.margin, body=config.body,
-                               held_radius=config.held_radius, refit_every_chunk=config.refit_obstacles),
-        checked=CheckConfig(initial_scale=max(config.rho, 1e-3), densify=config.densify) if config.checked else None,
-        metric_gradient=config.metric_gradient, densify=config.densify, guide_when_needed=config.guide_when_needed,
-        seed=seed)
+    return RuntimeConfig.from_settings(config.guidance, config.obstacle, scheduler=config.scheduler,
+                                       num_inference_steps=config.steps, n_action_steps=config.n_action_steps,
+                                       seed=seed)
 
 
 # ---- one process: policy + env + episodes ---------------------------------------------------------
@@ -297,7 +291,7 @@ class EpisodeRunner:
         task = evaluation_task(config, settings, self.policy.config)
         check_env_task(task, self.policy.config, config.env)
         self.task = task
-        image_size = config.image_size or settings.image_size or 128
+        image_size = config.perception.image_size or settings.image_size or 128
         needs_rgb = self.policy.config.observation.needs_rgb or bool(config.video_dir)
         self.env = env_factory.make_env(config.env, task=task, seed=config.seed, variation=config.variation,
                                         image_size=image_size, render_rgb=needs_rgb, max_steps=config.max_steps)
@@ -388,7 +382,7 @@ def _worker_init(config_dict: dict[str, Any], shapes: dict[str, bytes] | None = 
                 register_obstacle_shape(name, pickle.loads(payload), replace=True)
             for name, payload in (observation_types or {}).items():
                 register_observation_type(name, pickle.loads(payload), replace=True)
-        _WORKER = EpisodeRunner(EvalConfig(**config_dict))
+        _WORKER = EpisodeRunner(EvalConfig.from_dict(config_dict))
     except Exception as error:  # a Pool re-spawns workers whose initializer raises, forever: report it per job
         _WORKER_ERROR = error
 
@@ -495,21 +489,50 @@ def summarize(episodes: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 # Fields that change how an evaluation runs, not what it measures: every episode is seeded by itself.
 EVAL_FIELDS_NOT_MEASURED = ("workers",)
-# What results saved before a field existed were made with, where that is not the field's default.
+# Where each field of the flat EvalConfig (results saved before the settings were nested) lives now.
+FLAT_EVAL_FIELDS = {
+    "guidance": ("guidance", "mode"), "rho": ("guidance", "rho"), "last_steps": ("guidance", "last_steps"),
+    "per_train_step": ("guidance", "per_train_step"), "metric_gradient": ("guidance", "metric_gradient"),
+    "densify": ("guidance", "densify"), "checked": ("guidance", "checked"),
+    "guide_when_needed": ("guidance", "guide_when_needed"),
+    "obstacle_shape": ("obstacle", "shape"), "margin": ("obstacle", "margin"), "body": ("obstacle", "body"),
+    "held_radius": ("obstacle", "held_radius"), "refit_obstacles": ("obstacle", "refit"),
+    "segmenter": ("perception", "segmenter"), "detector": ("perception", "detector"),
+    "detector_dir": ("perception", "detector_dir"), "sam_dir": ("perception", "sam_dir"),
+    "image_size": ("perception", "image_size"),
+}
+# What flat results saved before a field existed were made with, where that is not the field's default.
 EVAL_FIELDS_BEFORE = {"body": "sphere"}
 EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
 
 
-def saved_config(made: dict[str, Any]) -> dict[str, Any]:
-    """A saved EvalConfig dict (results JSON, episode log) with each measured field added since it was saved set
-    to what it was made with (EVAL_FIELDS_BEFORE, else the field's default), so adding a field to EvalConfig
-    keeps earlier results current and a killed evaluation's log resumable."""
-    from dataclasses import MISSING, fields
+def saved_config(made: Mapping[str, Any]) -> dict[str, Any]:
+    """A saved EvalConfig dict (results JSON, episode log) in today's nested form, with each measured field added
+    since it was saved set to what it was made with (EVAL_FIELDS_BEFORE, else the field's default), so adding a
+    field to EvalConfig keeps earlier results current and a killed evaluation's log resumable. A flat dict, saved
+    before the settings were nested, has its fields moved into their sections (FLAT_EVAL_FIELDS)."""
+    from dataclasses import MISSING
 
-    made = dict(made)
-    for field in fields(EvalConfig):
-        if field.name not in made and field.name not in EVAL_FIELDS_NOT_MEASURED and field.default is not MISSING:
-            made[field.name] = json.loads(json.dumps(EVAL_FIELDS_BEFORE.get(field.name, field.default)))
+    made = json.loads(json.dumps(dict(made)))  # a copy, in JSON types
+    flat = not any(isinstance(made.get(name), Mapping) for name in _SECTIONS)
+    for old, (section, name) in FLAT_EVAL_FIELDS.items():  # "guidance" first: later keys fill its section
+        if old in made and not isinstance(made[old], Mapping):
+            value = made.pop(old)
+        elif flat and old in EVAL_FIELDS_BEFORE:
+            value = EVAL_FIELDS_BEFORE[old]
+        else:
+            continue
+        if isinstance(home := made.setdefault(section, {}), dict):  # else no EvalConfig wrote it: it won't match
+            home[name] = value
+    for spec in fields(EvalConfig):
+        if spec.name in EVAL_FIELDS_NOT_MEASURED or (spec.default is MISSING and spec.default_factory is MISSING):
+            continue
+        default = spec.default if spec.default_factory is MISSING else spec.default_factory()
+        if spec.name in _SECTIONS:
+            if isinstance(section := made.get(spec.name, {}), Mapping):  # else no EvalConfig wrote it: it won't match
+                made[spec.name] = {**json.loads(json.dumps(asdict(default))), **section}
+        elif spec.name not in made:
+            made[spec.name] = json.loads(json.dumps(default))
     return made
 
 
@@ -692,7 +715,7 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
             runner.close()
     elif jobs:
         context = mp.get_context("spawn")
-        plugins = (shapes_for_workers(config.obstacle_shape),
+        plugins = (shapes_for_workers(config.obstacle.shape),
                    observation_types_for_workers(load_config(checkpoint / "config.json").obs_type))
         with context.Pool(workers, initializer=_worker_init, initargs=(asdict(config), *plugins)) as pool:
             for index, record in pool.imap_unordered(_worker_run, jobs):
@@ -758,9 +781,8 @@ class RunConfig:
         task: simulator task, or the task `env`'s factory gets (default: the plan's skill, whose registry name
             is the task name).
         variation: scene variation (default: "obstacle" when the plan names obstacles, else "clean").
-        guidance, rho, last_steps, per_train_step, metric_gradient, scheduler, steps, checked, margin,
-            obstacle_shape: as EvalConfig.
-        segmenter, detector, detector_dir, sam_dir: the perception of targets and obstacles, as EvalConfig.
+        guidance, obstacle, perception, scheduler, steps: as EvalConfig, but guided by default (the recommended
+            preset, mode "clean").
         compare: also run the same scene without guidance, for the plot.
         seed: scene seed.
         out: folder for run.json, video.mp4 and top_view.png.
@@ -775,30 +797,20 @@ class RunConfig:
     registry: str | None = None
     task: str | None = None
     variation: str | None = None
-    guidance: str = "clean"
-    rho: float = DEFAULT_RHO
-    last_steps: int = DEFAULT_LAST_STEPS
-    per_train_step: bool = False
-    metric_gradient: bool = True
+    guidance: GuidanceSettings = field(default_factory=GuidanceSettings)
+    obstacle: ObstacleSettings = field(default_factory=ObstacleSettings)
+    perception: PerceptionSettings = field(default_factory=PerceptionSettings)
     scheduler: str | None = None
     steps: int | None = None
-    checked: bool = False
-    margin: float = 0.02
     compare: bool = False
     max_steps: int | None = None
     seed: int = DEFAULT_EVAL_SEED
     out: str = "run_out"
-    segmenter: str = "sim"
-    detector: str = "grounding_dino"
-    detector_dir: str | None = None
-    sam_dir: str | None = None
     env: str | None = None
-    obstacle_shape: str = "cylinder"
 
     def __post_init__(self):
-        check_segmenter_choice(self.segmenter)
         self.env = env_spec(self.env)
-        check_obstacle_shape(self.obstacle_shape)
+        _build_sections(self)
 
 
 def ground_obstacles(frame, phrases: Sequence[str]) -> tuple[list[str], list[str]]:
@@ -849,7 +861,7 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     from lano3dp.policy import DiffusionPolicy
     from lano3dp.policy.pretrained import packaged_checkpoint, packaged_checkpoints
     from lano3dp.report import plot_top_view
-    from lano3dp.runtime import PolicyRunner, observe, rollout
+    from lano3dp.runtime import PolicyRunner, RuntimeConfig, observe, rollout
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -872,7 +884,8 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     check_env_task(task, policy.config, config.env)
     variation = config.variation or ("obstacle" if plan.obstacles else "clean")
     env = env_factory.make_env(config.env, task=task, seed=config.seed, variation=variation,
-                               image_size=settings.image_size or 128, render_rgb=True, max_steps=config.max_steps)
+                               image_size=config.perception.image_size or settings.image_size or 128,
+                               render_rgb=True, max_steps=config.max_steps)
     max_steps = config.max_steps if config.env is None else (config.max_steps or getattr(env, "max_steps", None))
     observer = ObjectObserver(build_config_segmenter(config), n_points=policy.config.n_points,
                               crop_low=settings.crop_low, crop_high=settings.crop_high)
@@ -902,19 +915,15 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     held = plan.target_phrases[carried] if carried is not None else None
     log(f"task {task} / {variation}, seed {seed}: targets {targets}, obstacles {obstacles}")
 
-    conditions = [("guided" if config.guidance != "none" else "unguided", config.guidance)]
-    if config.compare and config.guidance != "none":
+    conditions = [("guided" if config.guidance.guided else "unguided", config.guidance.mode)]
+    if config.compare and config.guidance.guided:
         conditions.append(("unguided", "none"))
     episodes, paths = {}, []
     for label, mode in conditions:
-        eval_config = EvalConfig(checkpoint=str(checkpoint), guidance=mode, rho=config.rho,
-                                 last_steps=config.last_steps, per_train_step=config.per_train_step,
-                                 metric_gradient=config.metric_gradient, scheduler=config.scheduler, steps=config.steps,
-                                 checked=config.checked, margin=config.margin,
-                                 obstacle_shape=config.obstacle_shape, segmenter=config.segmenter,
-                                 detector=config.detector, detector_dir=config.detector_dir, sam_dir=config.sam_dir)
-        runner = PolicyRunner(policy, observer, runtime_config(eval_config, seed), target_phrases=targets,
-                              obstacle_phrases=obstacles, held_object=held)
+        runtime = RuntimeConfig.from_settings(replace(config.guidance, mode=mode), config.obstacle,
+                                              scheduler=config.scheduler, num_inference_steps=config.steps, seed=seed)
+        runner = PolicyRunner(policy, observer, runtime, target_phrases=targets, obstacle_phrases=obstacles,
+                              held_object=held)
         frames: list[np.ndarray] = []
         result = rollout(env, runner, seed=seed, max_steps=max_steps,
                          on_frame=lambda f, info, frames=frames: frames.append(f.rgb.copy()))

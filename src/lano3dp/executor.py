@@ -422,7 +422,7 @@ def eval_cell(name: str, config, *, inputs: Iterable[str] = ()) -> Cell:
 def _eval_config(cell: Cell):
     from lano3dp.evaluate import EvalConfig
 
-    return EvalConfig(**cell.params)
+    return EvalConfig.from_dict(cell.params)
 
 
 def _run_eval(cell: Cell) -> None:

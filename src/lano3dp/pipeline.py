@@ -182,7 +182,8 @@ def cached_eval(config) -> dict[str, Any] | None:
     if config.out and Path(config.out).exists() and not _weights_newer_than(config.checkpoint, Path(config.out)):
         previous = json.loads(Path(config.out).read_text())
         wanted = json.loads(json.dumps(asdict(config)))
-        # results saved before a field existed were made with its default (e.g. segmenter "sim")
+        # results saved before a field existed were made with its default (e.g. segmenter "sim"), and flat ones
+        # (saved before the settings were nested) are read into their sections
         made = saved_config(previous.get("config") or {})
         for name in _EVAL_FIELDS_NOT_MEASURED:
             wanted.pop(name, None)

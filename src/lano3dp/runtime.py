@@ -51,6 +51,7 @@ from lano3dp.guidance.costs import (
 )
 from lano3dp.guidance.fitting import fit_cylinder
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
+from lano3dp.guidance.settings import BODY_MODELS, GUIDANCE_PRESETS, SAFETY_MARGIN, GuidanceSettings, ObstacleSettings
 from lano3dp.guidance.shapes import (
     BUILTIN_OBSTACLE_SHAPES,
     describe_obstacle,  # re-exported: results and plots read it from here
@@ -64,8 +65,8 @@ OBSTACLE_SHAPES = BUILTIN_OBSTACLE_SHAPES
 # Points enough for a first-frame target cloud that an obstacle mostly hides (FPS repeats them to N): its
 # centroid is still the object's, where failing the episode would be certain.
 FIRST_FRAME_MIN_POINTS = 3
-BODY_MODELS = ("swept", "sphere")
 GRASP_FLAG = 10  # index of the grasp flag in the 11-D robot state
+_RECOMMENDED = GUIDANCE_PRESETS["recommended"]
 
 
 class ClosedLoopError(Lano3dpError, RuntimeError):
@@ -98,9 +99,9 @@ class ObstacleModel:
             they are fitted once, on the first frame of the episode, before the arm can occlude them.
     """
 
-    shape: str = "cylinder"
-    margin: float = 0.02
-    body: str = "swept"
+    shape: str = ObstacleSettings.shape
+    margin: float = SAFETY_MARGIN
+    body: str = ObstacleSettings.body
     held_radius: float | None = None
     held_extent: float = 2.0
     gripper_radius: float = 0.07
@@ -141,7 +142,8 @@ class ObstacleModel:
 
 @dataclass(frozen=True)
 class RuntimeConfig:
-    """How the runner samples and executes.
+    """How the runner samples and executes; `from_settings` builds it from a user's `guidance.GuidanceSettings`
+    and `ObstacleSettings`, whose defaults are these.
 
     Attributes:
         guidance: None or mode "none" for plain sampling; else the paper's guidance (mode "clean") or A_k guidance.
@@ -153,11 +155,12 @@ class RuntimeConfig:
         on_unclear: under checked execution, what to do when no try is clear: "execute" the clearest try anyway
             (and count it) or "stop" the episode.
         metric_gradient: make the guidance push isotropic in metres (`guidance.costs.MetricGradient`, from the
-            policy's action normaliser; beyond the paper). Without it the per-axis min-max normaliser makes the
-            push across a narrow demonstration range far weaker than the push along the path, and rho is in
-            normalised units; with it rho reads as metres per guided step.
+            policy's action normaliser; beyond the paper; on by default, as in the recommended preset). Without
+            it the per-axis min-max normaliser makes the push across a narrow demonstration range far weaker than
+            the push along the path, and rho is in normalised units; with it rho reads as metres per guided step.
         densify: cost (and check) the path with `densify - 1` extra points inside each segment, so a segment
-            cannot straddle a thin obstacle between two clear waypoints (`guidance.costs.Densified`; 1 = off).
+            cannot straddle a thin obstacle between two clear waypoints (`guidance.costs.Densified`; 1 = off;
+            default the recommended preset's 4).
         guide_when_needed: sample the policy's own chunk first and guide only when its horizon comes closer
             than the margin to an obstacle (one extra unguided sample per chunk near obstacles; beyond the paper).
         seed: seeds the sampling noise (one torch.Generator per runner, re-seeded on reset).
@@ -170,9 +173,10 @@ class RuntimeConfig:
     obstacle: ObstacleModel = field(default_factory=ObstacleModel)
     checked: CheckConfig | None = None
     on_unclear: str = "execute"
-    metric_gradient: bool = False
-    densify: int = 1
-    guide_when_needed: bool = False
+    # the recommended preset's, so a runner built without settings guides as `lano3dp eval --guidance clean`
+    metric_gradient: bool = _RECOMMENDED.metric_gradient
+    densify: int = _RECOMMENDED.densify
+    guide_when_needed: bool = _RECOMMENDED.guide_when_needed
     seed: int = 0
 
     def __post_init__(self):
@@ -186,6 +190,26 @@ class RuntimeConfig:
     @property
     def guided(self) -> bool:
         return self.guidance is not None and self.guidance.mode is not GuidanceMode.NONE and self.guidance.scale > 0
+
+    @classmethod
+    def from_settings(cls, guidance: GuidanceSettings, obstacle: ObstacleSettings | None = None, *,
+                      scheduler: str | None = None, num_inference_steps: int | None = None,
+                      n_action_steps: int | None = None, seed: int = 0) -> RuntimeConfig:
+        """The runner's config for a user's guidance and obstacle settings (as `lano3dp eval` and `run` build it)."""
+        obstacle = obstacle or ObstacleSettings()
+        sampler = None if not guidance.guided else GuidanceConfig(
+            mode=guidance.mode, scale=guidance.rho, last_steps=guidance.last_steps,
+            per_train_step=guidance.per_train_step, guided_clip_range=guidance.guided_clip_range,
+            push_weight=guidance.push_weight)
+        # checked execution escalates from rho (at least 1 mm, so an unguided first try can escalate at all)
+        checked = CheckConfig(initial_scale=max(guidance.rho, 1e-3), densify=guidance.densify) if guidance.checked \
+            else None
+        return cls(guidance=sampler, scheduler=scheduler, num_inference_steps=num_inference_steps,
+                   n_action_steps=n_action_steps,
+                   obstacle=ObstacleModel(shape=obstacle.shape, margin=obstacle.margin, body=obstacle.body,
+                                          held_radius=obstacle.held_radius, refit_every_chunk=obstacle.refit),
+                   checked=checked, metric_gradient=guidance.metric_gradient, densify=guidance.densify,
+                   guide_when_needed=guidance.guide_when_needed, seed=seed)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)

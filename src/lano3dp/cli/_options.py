@@ -2,11 +2,21 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import typer
 
-GUIDANCE_MODES = ("none", "noisy", "clean")
+from lano3dp.evaluate import PerceptionSettings
+from lano3dp.guidance.settings import (
+    BODY_MODELS,
+    GUIDANCE_MODES,
+    GUIDANCE_PRESETS,
+    PUSH_WEIGHTS,
+    GuidanceSettings,
+    ObstacleSettings,
+)
+
 SCHEDULERS = ("ddpm", "ddim")
 
 
@@ -146,3 +156,95 @@ def env_factory(spec: str | None, option: str = "--env") -> str | None:
         except EnvFactoryError as error:
             raise typer.BadParameter(str(error).removeprefix(f"--env {spec}: "), param_hint=option) from None
     return spec
+
+
+# ---- the settings `eval` and `run` share: one declaration each, mapped onto EvalConfig/RunConfig's sections ----
+def _preset_values(name: str) -> str:
+    """What each guidance preset sets `name` to, for --help: 'recommended 0.04, paper 4'."""
+    def text(value) -> str:
+        if isinstance(value, bool):
+            return "on" if value else "off"
+        if value is None:
+            return "none"
+        return f"{value:g}" if isinstance(value, float | int) else str(value)
+
+    return ", ".join(f"{preset} {text(getattr(settings, name))}" for preset, settings in GUIDANCE_PRESETS.items())
+
+
+# Guidance options default to None: the value of --guidance-preset, which a given option overrides.
+GUIDANCE_PRESET = typer.Option(
+    "recommended", "--guidance-preset",
+    help="Settings --guidance uses, each overridable by its option below: recommended (A_0|k on every DDIM step, "
+         "metric push, path densified) | paper (S = 10, push in normalised units, waypoints only; with --scheduler "
+         "ddpm --steps 100 --body sphere, the paper's whole form).")
+RHO = typer.Option(None, "--rho", help="Guidance scale rho: metres per guided step with --metric-push, else "
+                                       f"normalised units (default: the preset's: {_preset_values('rho')}).")
+LAST_STEPS = typer.Option(None, "--last-steps", min=0, help="S: guide while the training-scale step k <= S (100: "
+                                                            f"all; default: {_preset_values('last_steps')}).")
+METRIC_PUSH = typer.Option(None, "--metric-push/--paper-push",
+                           help="Push isotropically in metres, or as the paper in normalised action units (which "
+                                f"needs a far larger rho; default: {_preset_values('metric_gradient')}).")
+PER_TRAIN_STEP = typer.Option(None, "--per-train-step/--no-per-train-step",
+                              help="Scale rho by the scheduler stride (DDIM pushes as much as DDPM; default: "
+                                   f"{_preset_values('per_train_step')}).")
+DENSIFY = typer.Option(None, "--densify", min=1, help="Points per path segment the cost sees (1: waypoints only, as "
+                                                      f"the paper; default: {_preset_values('densify')}).")
+GUIDED_CLIP_RANGE = typer.Option(None, "--guided-clip-range",
+                                 help="Guided steps clip x_0 to [-r, r] (normalised units) instead of the "
+                                      "scheduler's [-1, 1], so a detour outside the demonstrations' range is not "
+                                      f"undone (default: {_preset_values('guided_clip_range')}, the scheduler's).")
+PUSH_WEIGHT = typer.Option(None, "--push-weight",
+                           help="constant (the paper: every guided step pushes rho * grad) | alpha_bar (each push "
+                                "times sqrt(abar_k abar_k-1), for DDIM guided on every step; default: "
+                                f"{_preset_values('push_weight')}).")
+CHECKED = typer.Option(None, "--checked/--no-checked", help="Checked execution: re-sample with larger rho while a "
+                                                            f"chunk collides (default: {_preset_values('checked')}).")
+GUIDE_WHEN_NEEDED = typer.Option(None, "--guide-when-needed/--no-guide-when-needed",
+                                 help="Guide a chunk only when the policy's own one comes within the margin of an "
+                                      f"obstacle (default: {_preset_values('guide_when_needed')}).")
+OBSTACLE_SHAPE = typer.Option(ObstacleSettings.shape, "--obstacle-shape", metavar="NAME", help=obstacle_shape_help())
+MARGIN = typer.Option(ObstacleSettings.margin, "--margin", min=0.0,
+                      help="Safety margin (m) beyond contact, part of Q*.")
+BODY = typer.Option(ObstacleSettings.body, "--body", help="What guidance keeps clear: swept (hand + held object, "
+                                                          "re-measured every chunk) | sphere (the paper: one ball "
+                                                          "round the EE point).")
+HELD_RADIUS = typer.Option(None, "--held-radius", min=0.0, help="--body sphere: its radius (m) in Q*; default: "
+                                                                "measured from the held object's cloud.")
+REFIT_OBSTACLES = typer.Option(ObstacleSettings.refit, "--refit-obstacles/--no-refit-obstacles",
+                               help="Re-fit obstacles before every chunk (moving obstacles).")
+SEGMENTER = typer.Option(PerceptionSettings.segmenter, "--segmenter", help=SEGMENTER_HELP)
+DETECTOR = typer.Option(PerceptionSettings.detector, "--detector", help="open-vocab: grounding_dino | owlv2.")
+DETECTOR_DIR = typer.Option(None, "--detector-dir", help=DETECTOR_DIR_HELP)
+SAM_DIR = typer.Option(None, "--sam-dir", help=SAM_DIR_HELP)
+IMAGE_SIZE = typer.Option(None, "--image-size", min=16, help="Camera resolution (default: that of the dataset the "
+                                                             "checkpoint was trained on).")
+
+
+def guidance_settings(mode: str, preset: str, **overrides) -> GuidanceSettings:
+    """--guidance and --guidance-preset, with the guidance options that were given (not None) overriding it."""
+    choice(mode, GUIDANCE_MODES, "--guidance")
+    choice(preset, tuple(GUIDANCE_PRESETS), "--guidance-preset")
+    choice(overrides.get("push_weight"), PUSH_WEIGHTS, "--push-weight")
+    try:
+        return replace(GUIDANCE_PRESETS[preset], mode=mode,
+                       **{name: value for name, value in overrides.items() if value is not None})
+    except ValueError as error:
+        raise typer.BadParameter(str(error), param_hint="--guidance") from None
+
+
+def obstacle_settings(shape: str, margin: float, body: str, held_radius: float | None,
+                      refit: bool) -> ObstacleSettings:
+    """The obstacle options; the shape is checked here, so call it after --env is imported (it may register one)."""
+    choice(body, BODY_MODELS, "--body")
+    obstacle_shape(shape)
+    if held_radius is not None and body != "sphere":
+        raise typer.BadParameter("a fixed held radius sizes the sphere body model; add --body sphere",
+                                 param_hint="--held-radius")
+    return ObstacleSettings(shape=shape, margin=margin, body=body, held_radius=held_radius, refit=refit)
+
+
+def perception_settings(kind: str, detector: str, detector_dir: Path | None, sam_dir: Path | None,
+                        image_size: int | None) -> PerceptionSettings:
+    segmenter(kind, detector, detector_dir, sam_dir)
+    return PerceptionSettings(segmenter=kind, detector=detector, detector_dir=detector_dir, sam_dir=sam_dir,
+                              image_size=image_size)

@@ -18,7 +18,9 @@ from pathlib import Path
 
 import typer
 
-from lano3dp.evaluate import DEFAULT_LAST_STEPS, DEFAULT_RHO
+from lano3dp.guidance.settings import GUIDANCE_PRESETS, SAFETY_MARGIN
+
+RECOMMENDED = GUIDANCE_PRESETS["recommended"]  # the guided condition's settings, rho and S overridable
 
 
 def register(app: typer.Typer) -> None:
@@ -37,8 +39,9 @@ def demo_command(
                                             "sizes the LR schedule)."),
     steps: int = typer.Option(None, min=1, help="Train exactly this many steps instead of a time budget."),
     episodes: int = typer.Option(20, min=1, help="Evaluation episodes per condition."),
-    rho: float = typer.Option(DEFAULT_RHO, help="Guidance scale rho (metres per guided step: isotropic push)."),
-    last_steps: int = typer.Option(DEFAULT_LAST_STEPS, help="Guide while the training-scale step k <= S (100: all)."),
+    rho: float = typer.Option(RECOMMENDED.rho, help="Guidance scale rho (metres per guided step: isotropic push)."),
+    last_steps: int = typer.Option(RECOMMENDED.last_steps, help="Guide while the training-scale step k <= S "
+                                                                "(100: all)."),
     points: int = typer.Option(64, min=16, help="Points per object cloud (the policy default: a training step "
                                                 "costs a quarter of 128 points' with the rest of the recipe; "
                                                 "bench/bench_policy.py)."),
@@ -106,6 +109,8 @@ def run_demo(*, out: Path, **options) -> Path:
 
 def _run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, steps: int | None, episodes: int,
               rho: float, last_steps: int, points: int, workers: int, seed: int, console) -> Path:
+    from dataclasses import replace
+
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from lano3dp.evaluate import EvalConfig, write_json
@@ -151,7 +156,8 @@ def _run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float,
     for name, variation, guidance in CONDITIONS:
         slug = name.replace(", ", "_").replace(" ", "_")
         config = EvalConfig(checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
-                            guidance=guidance, rho=rho, last_steps=last_steps, workers=workers,
+                            guidance=replace(RECOMMENDED, mode=guidance, rho=rho, last_steps=last_steps),
+                            workers=workers,
                             video_dir=str(out / "videos" / slug) if variation == "obstacle" else None, n_videos=1,
                             out=str(out / "eval" / f"{slug}.json"))
         with Progress(TextColumn(f"  {name:<24}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -237,8 +243,8 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         f"trained on **{store.n_episodes} scripted demonstrations** of clean scenes, then run in closed loop on new "
         "scenes: clean ones, and ones with a **novel obstacle** on the expert's path (never seen in training), "
         f"without and with the paper's cost guidance on A_0|k (rho = {rho:g} m per guided step with the isotropic "
-        f"metric push on the densified path, S = {last_steps}; the obstacle is segmented, fitted with a vertical "
-        "cylinder, and Q* = its radius + 2 cm + the carried object's extent, at least the open hand's 7 cm).",
+        f"metric push on the densified path, S = {last_steps}; the obstacle is segmented and fitted with a vertical "
+        f"cylinder, which the hand and the carried object are kept {100 * SAFETY_MARGIN:g} cm clear of).",
         "",
         f"Policy: {parameters / 1e6:.2f} M parameters, UNet {tuple(policy_config.down_dims)}, "
         f"{policy_config.n_points} points per object, obs {policy_config.n_obs_steps} steps, horizon "

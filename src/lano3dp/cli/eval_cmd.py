@@ -7,7 +7,6 @@ from pathlib import Path
 import typer
 
 from lano3dp.cli import _options
-from lano3dp.evaluate import DEFAULT_DENSIFY, DEFAULT_LAST_STEPS, DEFAULT_RHO
 
 
 def register(app: typer.Typer) -> None:
@@ -26,38 +25,35 @@ def eval_command(
     obstacles: list[str] = typer.Option(None, "--obstacles", help="Object to avoid (repeatable). Default: every "
                                                                   "object the scene marks as an obstacle."),
     guidance: str = typer.Option("none", help="none | noisy (cost on A_k) | clean (the paper's A_0|k)."),
-    rho: float = typer.Option(DEFAULT_RHO, help="Guidance scale rho (metres per guided step with --metric-push)."),
-    last_steps: int = typer.Option(DEFAULT_LAST_STEPS, help="Guide while the training-scale step k <= S (100: all)."),
-    metric_push: bool = typer.Option(True, "--metric-push/--paper-push",
-                                     help="Push isotropically in metres, or as the paper in normalised action units "
-                                          "(which needs a far larger rho)."),
-    per_train_step: bool = typer.Option(False, help="Scale rho by the scheduler stride (DDIM pushes as much as DDPM)."),
-    densify: int = typer.Option(DEFAULT_DENSIFY, min=1, help="Points per path segment the cost sees (1: waypoints "
-                                                            "only, as the paper)."),
+    guidance_preset: str = _options.GUIDANCE_PRESET,
+    rho: float = _options.RHO,
+    last_steps: int = _options.LAST_STEPS,
+    metric_push: bool = _options.METRIC_PUSH,
+    per_train_step: bool = _options.PER_TRAIN_STEP,
+    densify: int = _options.DENSIFY,
+    guided_clip_range: float = _options.GUIDED_CLIP_RANGE,
+    push_weight: str = _options.PUSH_WEIGHT,
+    checked: bool = _options.CHECKED,
+    guide_when_needed: bool = _options.GUIDE_WHEN_NEEDED,
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
-    checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
-    margin: float = typer.Option(0.02, help="Safety margin (m) beyond contact, part of Q*."),
+    obstacle_shape: str = _options.OBSTACLE_SHAPE,
+    margin: float = _options.MARGIN,
+    body: str = _options.BODY,
+    held_radius: float = _options.HELD_RADIUS,
+    refit_obstacles: bool = _options.REFIT_OBSTACLES,
     obstacle_scenes_only: bool = typer.Option(False, help="With an obstacle variation: the first --episodes seeds "
                                                           "whose scene has room for its obstacles."),
-    refit_obstacles: bool = typer.Option(False, help="Re-fit obstacles before every chunk (moving obstacles)."),
-    guide_when_needed: bool = typer.Option(False, help="Guide a chunk only when the policy's own one comes within "
-                                                       "the margin of an obstacle."),
-    obstacle_shape: str = typer.Option("cylinder", "--obstacle-shape", metavar="NAME",
-                                       help=_options.obstacle_shape_help()),
-    body: str = typer.Option("swept", help="What guidance keeps clear: swept (hand + held object, re-measured "
-                                          "every chunk) | sphere (the paper: one ball round the EE point)."),
-    held_radius: float = typer.Option(None, help="--body sphere: its radius (m) in Q*; default: measured from the "
-                                                 "held object's cloud."),
     max_steps: int = typer.Option(None, min=1, help="Episode step limit (default: the task's)."),
     workers: int = typer.Option(1, min=1, help="Parallel episode processes (1 torch thread each)."),
     video_dir: Path = typer.Option(None, help="Write MP4s of the first --n-videos episodes here."),
     n_videos: int = typer.Option(2, min=0, help="How many episodes get a video."),
     seed: int = typer.Option(1_000_000, help="First episode seed (apart from the demonstration seeds)."),
-    segmenter: str = typer.Option("sim", help=_options.SEGMENTER_HELP),
-    detector: str = typer.Option("grounding_dino", help="open-vocab: grounding_dino | owlv2."),
-    detector_dir: Path = typer.Option(None, help=_options.DETECTOR_DIR_HELP),
-    sam_dir: Path = typer.Option(None, help=_options.SAM_DIR_HELP),
+    segmenter: str = _options.SEGMENTER,
+    detector: str = _options.DETECTOR,
+    detector_dir: Path = _options.DETECTOR_DIR,
+    sam_dir: Path = _options.SAM_DIR,
+    image_size: int = _options.IMAGE_SIZE,
     env: str = typer.Option(None, "--env", help=_options.ENV_HELP),
     out: Path = typer.Option(Path("results.json"), help="Results JSON; each finished episode is also appended to "
                                                         "<out>.episodes.jsonl, from which a killed eval resumes."),
@@ -75,14 +71,13 @@ def eval_command(
     if env is None:  # a user's env has its own task names and variations
         _options.task_name(task)
         _options.variation(variation)
-    _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
+    guidance_settings = _options.guidance_settings(
+        guidance, guidance_preset, rho=rho, last_steps=last_steps, metric_gradient=metric_push,
+        per_train_step=per_train_step, densify=densify, guided_clip_range=guided_clip_range, push_weight=push_weight,
+        checked=checked, guide_when_needed=guide_when_needed)
     _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
-    _options.choice(body, ("swept", "sphere"), "--body")
-    _options.obstacle_shape(obstacle_shape)
-    if held_radius is not None and body != "sphere":
-        raise typer.BadParameter("a fixed held radius sizes the sphere body model; add --body sphere",
-                                 param_hint="--held-radius")
-    _options.segmenter(segmenter, detector, detector_dir, sam_dir)
+    obstacle = _options.obstacle_settings(obstacle_shape, margin, body, held_radius, refit_obstacles)
+    perception = _options.perception_settings(segmenter, detector, detector_dir, sam_dir, image_size)
     _options.existing_path(checkpoint, "--checkpoint")
     _options.output_path(out, folder=False)
     _options.output_path(video_dir, "--video-dir", folder=True)
@@ -93,18 +88,14 @@ def eval_command(
         checkpoint = packaged_checkpoint(task)
     config = EvalConfig(
         checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
-        obstacles=list(obstacles) if obstacles else None, guidance=guidance, rho=rho, last_steps=last_steps,
-        per_train_step=per_train_step, metric_gradient=metric_push, densify=densify, scheduler=scheduler, steps=steps,
-        checked=checked, margin=margin, obstacle_shape=obstacle_shape,
-        body=body, obstacle_scenes_only=obstacle_scenes_only, refit_obstacles=refit_obstacles,
-        guide_when_needed=guide_when_needed,
-        held_radius=held_radius, max_steps=max_steps, workers=workers,
-        video_dir=str(video_dir) if video_dir else None, n_videos=n_videos, seed=seed, out=str(out),
-        segmenter=segmenter, detector=detector, detector_dir=str(detector_dir) if detector_dir else None,
-        sam_dir=str(sam_dir) if sam_dir else None, env=env)
+        obstacles=list(obstacles) if obstacles else None, guidance=guidance_settings, obstacle=obstacle,
+        perception=perception, scheduler=scheduler, steps=steps, obstacle_scenes_only=obstacle_scenes_only,
+        max_steps=max_steps, workers=workers, video_dir=str(video_dir) if video_dir else None, n_videos=n_videos,
+        seed=seed, out=str(out), env=env)
     console.print(f"[bold]eval[/bold] {checkpoint} on {task or '(dataset task)'} / {variation}"
-                  + (f" in {env}" if env else "") + f": {episodes} episodes, "
-                  f"guidance {guidance}" + (f" rho={rho} S={last_steps}" if guidance != "none" else "")
+                  + (f" in {env}" if env else "") + f": {episodes} episodes, guidance {guidance}"
+                  + (f" ({guidance_preset}) rho={guidance_settings.rho:g} S={guidance_settings.last_steps}"
+                     if guidance_settings.guided else "")
                   + f", {workers} worker(s)")
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   TextColumn("{task.fields[status]}"), console=console) as bar:

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import typer
 
+from lano3dp.guidance.settings import SAFETY_MARGIN
+
 
 def register(app: typer.Typer) -> None:
     app.command("guidance-figures")(guidance_figures)
@@ -34,7 +36,7 @@ def guidance_figures(
     analytic: bool = typer.Option(False, help="Use the analytic Gaussian prior of a straight path through the "
                                               "obstacle instead of a policy (no checkpoint needed)."),
     held_radius: float = typer.Option(0.0, help="Radius (m) of what the gripper holds."),
-    margin: float = typer.Option(0.02, help="Extra safety margin (m); Q* = radius + held radius + margin."),
+    margin: float = typer.Option(SAFETY_MARGIN, help="Extra safety margin (m); Q* = radius + held radius + margin."),
     mode: str = typer.Option("clean", help="Guidance for Fig. 5: clean (A_0|k, the paper) or noisy (A_k)."),
     rho: float = typer.Option(1.0, help="Guidance scale for Fig. 5."),
     rhos: str = typer.Option("0,0.25,1,4", help="Comma-separated guidance scales for Fig. 6."),

@@ -7,7 +7,6 @@ from pathlib import Path
 import typer
 
 from lano3dp.cli import _options
-from lano3dp.evaluate import DEFAULT_LAST_STEPS, DEFAULT_RHO
 
 
 def register(app: typer.Typer) -> None:
@@ -23,23 +22,31 @@ def run_command(
     task: str = typer.Option(None, help="Simulator task (default: the plan's skill)."),
     variation: str = typer.Option(None, help="Scene variation (default: obstacle if the plan names obstacles)."),
     guidance: str = typer.Option("clean", help="none | noisy | clean (the paper's A_0|k guidance)."),
-    rho: float = typer.Option(DEFAULT_RHO, help="Guidance scale rho (metres per guided step with --metric-push)."),
-    last_steps: int = typer.Option(DEFAULT_LAST_STEPS, help="Guide while the training-scale step k <= S (100: all)."),
-    metric_push: bool = typer.Option(True, "--metric-push/--paper-push",
-                                     help="Push isotropically in metres, or as the paper in normalised action units "
-                                          "(which needs a far larger rho)."),
+    guidance_preset: str = _options.GUIDANCE_PRESET,
+    rho: float = _options.RHO,
+    last_steps: int = _options.LAST_STEPS,
+    metric_push: bool = _options.METRIC_PUSH,
+    per_train_step: bool = _options.PER_TRAIN_STEP,
+    densify: int = _options.DENSIFY,
+    guided_clip_range: float = _options.GUIDED_CLIP_RANGE,
+    push_weight: str = _options.PUSH_WEIGHT,
+    checked: bool = _options.CHECKED,
+    guide_when_needed: bool = _options.GUIDE_WHEN_NEEDED,
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
-    steps: int = typer.Option(None, help="Denoising steps (default: the policy's)."),
-    checked: bool = typer.Option(False, help="Checked execution: re-sample with larger rho while a chunk collides."),
-    obstacle_shape: str = typer.Option("cylinder", "--obstacle-shape", metavar="NAME",
-                                       help=_options.obstacle_shape_help()),
+    steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
+    obstacle_shape: str = _options.OBSTACLE_SHAPE,
+    margin: float = _options.MARGIN,
+    body: str = _options.BODY,
+    held_radius: float = _options.HELD_RADIUS,
+    refit_obstacles: bool = _options.REFIT_OBSTACLES,
     compare: bool = typer.Option(False, help="Also run the same scene without guidance (both paths in the plot)."),
     max_steps: int = typer.Option(None, help="Episode step limit (default: the task's)."),
     seed: int = typer.Option(1_000_000, help="Scene seed."),
-    segmenter: str = typer.Option("sim", help=_options.SEGMENTER_HELP),
-    detector: str = typer.Option("grounding_dino", help="open-vocab: grounding_dino | owlv2."),
-    detector_dir: Path = typer.Option(None, help=_options.DETECTOR_DIR_HELP),
-    sam_dir: Path = typer.Option(None, help=_options.SAM_DIR_HELP),
+    segmenter: str = _options.SEGMENTER,
+    detector: str = _options.DETECTOR,
+    detector_dir: Path = _options.DETECTOR_DIR,
+    sam_dir: Path = _options.SAM_DIR,
+    image_size: int = _options.IMAGE_SIZE,
     env: str = typer.Option(None, "--env", help=_options.ENV_HELP),
     out: Path = typer.Option(Path("run_out"), help="Folder for run.json, video_*.mp4 and top_view.png."),
 ) -> None:
@@ -55,22 +62,20 @@ def run_command(
     if env is None:  # a user's env has its own task names and variations
         _options.task_name(task)
         _options.variation(variation)
-    _options.choice(guidance, _options.GUIDANCE_MODES, "--guidance")
+    guidance_settings = _options.guidance_settings(
+        guidance, guidance_preset, rho=rho, last_steps=last_steps, metric_gradient=metric_push,
+        per_train_step=per_train_step, densify=densify, guided_clip_range=guided_clip_range, push_weight=push_weight,
+        checked=checked, guide_when_needed=guide_when_needed)
     _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
-    _options.obstacle_shape(obstacle_shape)
-    _options.segmenter(segmenter, detector, detector_dir, sam_dir)
+    obstacle = _options.obstacle_settings(obstacle_shape, margin, body, held_radius, refit_obstacles)
+    perception = _options.perception_settings(segmenter, detector, detector_dir, sam_dir, image_size)
     _options.existing_path(checkpoint, "--checkpoint")
     _options.existing_path(registry, "--registry")
     _options.output_path(out, folder=True)
     config = RunConfig(instruction=instruction, checkpoint=str(checkpoint) if checkpoint else None,
                        registry=str(registry) if registry else None, task=task, variation=variation,
-                       guidance=guidance, rho=rho, last_steps=last_steps, metric_gradient=metric_push,
-                       scheduler=scheduler, steps=steps,
-                       checked=checked, obstacle_shape=obstacle_shape, compare=compare, max_steps=max_steps,
-                       seed=seed, out=str(out),
-                       segmenter=segmenter, detector=detector,
-                       detector_dir=str(detector_dir) if detector_dir else None,
-                       sam_dir=str(sam_dir) if sam_dir else None, env=env)
+                       guidance=guidance_settings, obstacle=obstacle, perception=perception, scheduler=scheduler,
+                       steps=steps, compare=compare, max_steps=max_steps, seed=seed, out=str(out), env=env)
     result = run_instruction(config, log=console.print, command=command_line(ctx))
     console.print(f"video(s): {', '.join(e['video'] for e in result['episodes'].values())}")
     console.print(f"top view: {result['top_view']}   record: {Path(out) / 'run.json'}")

@@ -20,11 +20,15 @@ _EXPORTS = {
     "DenoiseStep": "sampler", "GuidanceConfig": "sampler", "GuidanceMode": "sampler", "denoise": "sampler",
     "ObstacleShape": "shapes", "UnknownObstacleShapeError": "shapes", "get_obstacle_shape": "shapes",
     "obstacle_shape_names": "shapes", "register_obstacle_shape": "shapes", "unregister_obstacle_shape": "shapes",
+    "GUIDANCE_PRESETS": "settings", "GuidanceSettings": "settings", "ObstacleSettings": "settings",
+    "SAFETY_MARGIN": "settings",
 }
 
 __all__ = [
-    "CheckConfig", "CheckedResult", "CollisionError", "Cylinder", "DenoiseStep", "Densified", "GuidanceConfig",
-    "GuidanceError", "GuidanceMode", "MetricGradient", "Obstacle", "ObstacleSet", "ObstacleShape", "OrientedBox",
+    "GUIDANCE_PRESETS", "SAFETY_MARGIN", "CheckConfig", "CheckedResult", "CollisionError", "Cylinder", "DenoiseStep",
+    "Densified", "GuidanceConfig",
+    "GuidanceError", "GuidanceMode", "GuidanceSettings", "MetricGradient", "Obstacle", "ObstacleSet",
+    "ObstacleSettings", "ObstacleShape", "OrientedBox",
     "PointCloudObstacle", "PositionCost", "Sphere", "SweptBody", "UnknownObstacleShapeError", "checked_sample",
     "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "min_clearance", "obstacle_shape_names",
     "register_obstacle_shape", "unregister_obstacle_shape",
@@ -49,6 +53,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
     from lano3dp.guidance.exceptions import CollisionError, GuidanceError
     from lano3dp.guidance.fitting import fit_box, fit_cylinder
     from lano3dp.guidance.sampler import DenoiseStep, GuidanceConfig, GuidanceMode, denoise
+    from lano3dp.guidance.settings import GUIDANCE_PRESETS, SAFETY_MARGIN, GuidanceSettings, ObstacleSettings
     from lano3dp.guidance.shapes import (
         ObstacleShape,
         UnknownObstacleShapeError,

@@ -34,6 +34,7 @@ import numpy as np
 import torch
 
 from lano3dp.errors import EmptyCloudError
+from lano3dp.guidance.settings import SAFETY_MARGIN
 
 # sqrt has an infinite derivative at 0; a waypoint exactly on an obstacle's axis gets a zero
 # (not NaN) gradient instead. The offset, 1e-10 m once square-rooted, is far below float32 resolution
@@ -70,7 +71,7 @@ class Obstacle(ABC):
             the obstacle as an infinite vertical prism; z is ignored.
     """
 
-    def __init__(self, *, held_radius: float = 0.0, margin: float = 0.02, xy_only: bool = False):
+    def __init__(self, *, held_radius: float = 0.0, margin: float = SAFETY_MARGIN, xy_only: bool = False):
         if held_radius < 0 or margin < 0:
             raise ValueError(f"held_radius and margin must be >= 0, got {held_radius}, {margin}")
         self.held_radius = float(held_radius)
@@ -108,7 +109,8 @@ class Cylinder(Obstacle):
     """
 
     def __init__(self, center: Sequence[float], radius: float, *, z_min: float = -math.inf,
-                 z_max: float = math.inf, xy_only: bool = True, held_radius: float = 0.0, margin: float = 0.02):
+                 z_max: float = math.inf, xy_only: bool = True, held_radius: float = 0.0,
+                 margin: float = SAFETY_MARGIN):
         super().__init__(held_radius=held_radius, margin=margin, xy_only=xy_only)
         if len(center) != 2:
             raise ValueError(f"Cylinder center is (x, y), got {center!r}")
@@ -139,7 +141,7 @@ class Sphere(Obstacle):
     """A ball; with `xy_only` a disc in the horizontal plane (an infinite vertical cylinder)."""
 
     def __init__(self, center: Sequence[float], radius: float, *, xy_only: bool = False,
-                 held_radius: float = 0.0, margin: float = 0.02):
+                 held_radius: float = 0.0, margin: float = SAFETY_MARGIN):
         super().__init__(held_radius=held_radius, margin=margin, xy_only=xy_only)
         if len(center) != 3 or radius <= 0:
             raise ValueError(f"Sphere needs a center (x, y, z) and radius > 0, got {center!r}, {radius}")
@@ -178,7 +180,7 @@ class OrientedBox(Obstacle):
     """
 
     def __init__(self, center: Sequence[float], half_extents: Sequence[float], yaw: float = 0.0, *,
-                 xy_only: bool = False, held_radius: float = 0.0, margin: float = 0.02):
+                 xy_only: bool = False, held_radius: float = 0.0, margin: float = SAFETY_MARGIN):
         super().__init__(held_radius=held_radius, margin=margin, xy_only=xy_only)
         if len(center) != 3 or len(half_extents) != 3 or min(half_extents) <= 0:
             raise ValueError(f"OrientedBox needs center (3,) and positive half_extents (3,), got "
@@ -226,7 +228,7 @@ class PointCloudObstacle(Obstacle):
     """
 
     def __init__(self, points, *, point_radius: float = 0.01, xy_only: bool = True, min_points: int = 1,
-                 held_radius: float = 0.0, margin: float = 0.02):
+                 held_radius: float = 0.0, margin: float = SAFETY_MARGIN):
         super().__init__(held_radius=held_radius, margin=margin, xy_only=xy_only)
         points = torch.as_tensor(np.asarray(points, dtype=np.float32))
         if points.ndim != 2 or points.shape[-1] != 3:
@@ -304,7 +306,7 @@ class SweptBody:
             raise ValueError(f"SweptBody needs K offsets (K, 3) and K radii >= 0, got {tuple(offsets.shape)}, "
                              f"{tuple(radii.shape)}")
         self.obstacle, self.offsets, self.radii = obstacle, offsets, radii
-        self.margin = float(getattr(obstacle, "margin", 0.02) if margin is None else margin)
+        self.margin = float(getattr(obstacle, "margin", SAFETY_MARGIN) if margin is None else margin)
 
     @property
     def reach(self) -> float:

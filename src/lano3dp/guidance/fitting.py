@@ -13,6 +13,7 @@ import numpy as np
 
 from lano3dp.errors import EmptyCloudError
 from lano3dp.guidance.costs import Cylinder, OrientedBox
+from lano3dp.guidance.settings import SAFETY_MARGIN
 
 
 def _finite_points(points, min_points: int) -> np.ndarray:
@@ -37,7 +38,7 @@ def fit_circle_xy(xy: np.ndarray) -> tuple[np.ndarray, float] | None:
     return (center, float(np.sqrt(radius_sq))) if radius_sq > 0 else None
 
 
-def fit_cylinder(points, *, min_points: int = 10, held_radius: float = 0.0, margin: float = 0.02,
+def fit_cylinder(points, *, min_points: int = 10, held_radius: float = 0.0, margin: float = SAFETY_MARGIN,
                  xy_only: bool = True, coverage: float = 1.0) -> Cylinder:
     """A vertical cylinder around an obstacle's points.
 
@@ -68,7 +69,7 @@ def fit_cylinder(points, *, min_points: int = 10, held_radius: float = 0.0, marg
                     xy_only=xy_only, held_radius=held_radius, margin=margin)
 
 
-def fit_box(points, *, min_points: int = 10, held_radius: float = 0.0, margin: float = 0.02,
+def fit_box(points, *, min_points: int = 10, held_radius: float = 0.0, margin: float = SAFETY_MARGIN,
             xy_only: bool = False, angle_resolution_deg: float = 0.5) -> OrientedBox:
     """A yaw-only oriented box: the minimum-area footprint rectangle and the points' z range.
 

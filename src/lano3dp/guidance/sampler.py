@@ -52,12 +52,10 @@ from enum import StrEnum
 import torch
 
 from lano3dp.guidance.exceptions import GuidanceError
+from lano3dp.guidance.settings import PUSH_WEIGHTS
 
 NoiseFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
 CostFn = Callable[[torch.Tensor], torch.Tensor]
-
-
-PUSH_WEIGHTS = ("constant", "alpha_bar")
 
 
 class GuidanceMode(StrEnum):

@@ -27,6 +27,7 @@ from typing import Any
 
 from lano3dp.errors import EmptyCloudError
 from lano3dp.guidance.exceptions import GuidanceError
+from lano3dp.guidance.settings import SAFETY_MARGIN
 
 OBSTACLE_COLOR = "tab:red"
 
@@ -138,7 +139,8 @@ _BUILTIN_BY_COST = {"Cylinder": "cylinder", "OrientedBox": "box", "PointCloudObs
 
 def register_obstacle_shape(name: str, shape, *, replace: bool = False) -> ObstacleShape:
     """Make `shape` (an ObstacleShape, or a class of one taking no arguments) available as `name`: to
-    `runtime.ObstacleModel(shape=name)`, `EvalConfig(obstacle_shape=name)` and `--obstacle-shape name`.
+    `runtime.ObstacleModel(shape=name)`, `ObstacleSettings(shape=name)` (in EvalConfig and RunConfig) and
+    `--obstacle-shape name`.
 
     Registering a name again with an object of the same class replaces it (a module imported twice); another
     class needs `replace=True`, so a plug-in cannot silently take over a built-in shape.
@@ -182,7 +184,7 @@ def get_obstacle_shape(name: str) -> ObstacleShape:
     return shape
 
 
-def fit_obstacle(name: str, points, *, held_radius: float = 0.0, margin: float = 0.02, xy_only: bool = True):
+def fit_obstacle(name: str, points, *, held_radius: float = 0.0, margin: float = SAFETY_MARGIN, xy_only: bool = True):
     """Fit the shape registered as `name` to (N, 3) world points (m) and check what it returns.
 
     Raises:

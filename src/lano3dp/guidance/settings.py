@@ -1,0 +1,118 @@
+"""What a user chooses about guidance and obstacles, as plain data: the one place their defaults are written.
+
+    GuidanceSettings   how a chunk is guided: mode, rho, S, the push (metric or the paper's), densify, clipping,
+                       checked execution. Its defaults are the recommended preset, GUIDANCE_PRESETS["recommended"].
+    ObstacleSettings   how an obstacle's points become a cost: the fitted shape, the body kept clear, the margin.
+    SAFETY_MARGIN      the 2 cm beyond contact at which every obstacle cost starts pushing.
+
+`evaluate.EvalConfig` and `RunConfig` nest these (and save them verbatim in results); `runtime.RuntimeConfig.
+from_settings` turns them into what the runner executes, and `RuntimeConfig`'s own defaults are read from here,
+so the README's stated defaults, the command line's and the runtime's are one set (tests/test_config_defaults.py).
+
+This module imports neither torch nor the sampler, so the command line can read defaults for its --help cheaply.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+# Metres beyond contact at which an obstacle cost starts pushing (part of Q*).
+SAFETY_MARGIN = 0.02
+GUIDANCE_MODES = ("none", "noisy", "clean")  # none; the cost on A_k (prior work); on A_0|k (the paper)
+PUSH_WEIGHTS = ("constant", "alpha_bar")  # see guidance.sampler's module docstring
+BODY_MODELS = ("swept", "sphere")
+
+
+@dataclass(frozen=True)
+class GuidanceSettings:
+    """How chunks are guided. The defaults are the recommended preset: A_0|k cost on every DDIM step (S = 100
+    training steps covers all 10), an isotropic push of 4 cm per guided step on the path densified x4, every push
+    of the same weight and the scheduler's clipping; the closed-loop results (results/obstacles*.md) were made
+    with these. The synthetic sweep (results/bench_guidance.json, issue 3) has no row of them: its
+    nearest, DDIM-10 at rho 0.04 on every step with push_weight "alpha_bar" and guided_clip_range 3, left 1% of
+    sampled paths with a segment through the obstacle (2 cm: 19%). GUIDANCE_PRESETS["paper"] is the paper's form.
+
+    Attributes:
+        mode: "none", "noisy" (cost on A_k) or "clean" (the paper's A_0|k).
+        rho: the guidance scale: metres per guided step with `metric_gradient`, else normalised action units.
+        last_steps: S; guide while the training-scale step k <= S (100: every step).
+        per_train_step: multiply rho by the scheduler stride, so DDIM pushes as much in total as DDPM-100.
+        metric_gradient: push isotropically in metres (`guidance.MetricGradient`); False is the paper's push in
+            the normaliser's units (rho then needs to be far larger).
+        densify: points per path segment the cost and the check see (1: waypoints only, as the paper).
+        guided_clip_range: guided steps clip the x_0 estimate to [-r, r] (normalised units) instead of the
+            scheduler's [-1, 1]; None keeps the scheduler's. Finite, as results JSON cannot hold inf.
+        push_weight: "constant" (the paper) or "alpha_bar" (each push times sqrt(abar_k abar_k-1); for DDIM).
+        checked: checked execution (re-sample with a larger rho while the executed part collides).
+        guide_when_needed: guide a chunk only when the policy's own one comes within the margin of an obstacle.
+    """
+
+    mode: str = "clean"
+    rho: float = 0.04
+    last_steps: int = 100
+    per_train_step: bool = False
+    metric_gradient: bool = True
+    densify: int = 4
+    guided_clip_range: float | None = None
+    push_weight: str = "constant"
+    checked: bool = False
+    guide_when_needed: bool = False
+
+    def __post_init__(self):
+        if self.mode not in GUIDANCE_MODES:
+            raise ValueError(f"guidance must be 'none', 'noisy' or 'clean', got {self.mode!r}")
+        if self.rho < 0 or self.last_steps < 0:
+            raise ValueError(f"guidance rho and S must be >= 0, got {self.rho}, {self.last_steps}")
+        if self.densify < 1:
+            raise ValueError(f"densify must be >= 1, got {self.densify}")
+        if self.guided_clip_range is not None and not (0 < self.guided_clip_range < math.inf):
+            raise ValueError(f"guided_clip_range must be a finite number > 0 or None, got {self.guided_clip_range}")
+        if self.push_weight not in PUSH_WEIGHTS:
+            raise ValueError(f"push_weight must be one of {', '.join(PUSH_WEIGHTS)}, got {self.push_weight!r}")
+
+    @property
+    def guided(self) -> bool:
+        return self.mode != "none"
+
+
+GUIDANCE_PRESETS: dict[str, GuidanceSettings] = {
+    "recommended": GuidanceSettings(),
+    # The paper's Algorithm 1 as published: S = 10, the push in normalised units, waypoints only (rho 4 is the
+    # smallest with which bench_guidance's DDPM-100 waypoints cleared the obstacle, 1% colliding; the segments
+    # between them did not). The paper also sampled with DDPM-100 and kept a ball of the held object's diameter
+    # clear: add scheduler "ddpm", steps 100 and ObstacleSettings(body="sphere").
+    "paper": GuidanceSettings(rho=4.0, last_steps=10, metric_gradient=False, densify=1),
+}
+
+
+@dataclass(frozen=True)
+class ObstacleSettings:
+    """How obstacles become costs (the fields of `runtime.ObstacleModel` a user chooses).
+
+    Attributes:
+        shape: the registered shape fitted to each obstacle's points: "cylinder" (the paper), "box", "points",
+            or one registered with `lano3dp.guidance.register_obstacle_shape` (see `guidance.shapes`).
+        margin: metres beyond contact at which the cost starts pushing (part of Q*).
+        body: what guidance keeps clear: "swept" (hand and held object as balls re-measured every chunk) or
+            "sphere" (the paper: one ball of held_radius round the EE point).
+        held_radius: ("sphere") its radius in m; None measures it from the held object's cloud.
+        refit: re-segment and re-fit the obstacles before every chunk (moving obstacles).
+    """
+
+    shape: str = "cylinder"
+    margin: float = SAFETY_MARGIN
+    body: str = "swept"
+    held_radius: float | None = None
+    refit: bool = False
+
+    def __post_init__(self):
+        from lano3dp.guidance.shapes import get_obstacle_shape
+
+        get_obstacle_shape(self.shape)  # an unknown name fails here, naming the registered ones
+        if self.body not in BODY_MODELS:
+            raise ValueError(f"body must be 'swept' or 'sphere', got {self.body!r}")
+        if self.held_radius is not None and self.body != "sphere":
+            raise ValueError("a fixed held radius sizes the 'sphere' body model; add body='sphere' (--body sphere)")
+        if self.margin < 0 or (self.held_radius is not None and self.held_radius < 0):
+            raise ValueError(f"margin and held_radius must be >= 0, got {self.margin}, {self.held_radius}")

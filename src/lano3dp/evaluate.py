@@ -395,36 +395,17 @@ def _worker_run(job: tuple[int, int, str | None]) -> tuple[int, dict[str, Any]]:
 
 
 def shapes_for_workers(name: str) -> dict[str, bytes]:
-    """{name: pickled shape} for a shape registered in this process and not built in, as spawned worker processes
-    start with the built-in shapes alone; {} for a built-in one. Pickled here, unpickled in `_worker_init`, so a
-    worker that cannot unpickle it reports that per episode instead of dying before its initializer runs."""
-    import pickle
+    """{name: pickled shape} for a user's obstacle shape, which spawned worker processes would not know."""
+    from lano3dp.guidance.shapes import shape_for_workers
 
-    from lano3dp.guidance.shapes import BUILTIN_OBSTACLE_SHAPES, get_obstacle_shape
-
-    if name in BUILTIN_OBSTACLE_SHAPES:
-        return {}
-    try:
-        return {name: pickle.dumps(get_obstacle_shape(name))}
-    except (pickle.PicklingError, AttributeError, TypeError) as error:
-        raise ValueError(f"obstacle shape {name!r} cannot be sent to worker processes ({error}); define its class "
-                         "at the top level of an importable module, or evaluate with workers=1") from None
+    return shape_for_workers(name)
 
 
 def observation_types_for_workers(name: str) -> dict[str, bytes]:
-    """{name: pickled observation type} for a type registered in this process and not built in (a checkpoint's
-    obs_type), as spawned worker processes start with the built-in ones alone; {} for a built-in one."""
-    import pickle
+    """{name: pickled observation type} for a user's type (a checkpoint's obs_type), likewise."""
+    from lano3dp.policy.observations import observation_type_for_workers
 
-    from lano3dp.policy.observations import BUILTIN_OBSERVATION_TYPES, get_observation_type
-
-    if name in BUILTIN_OBSERVATION_TYPES:
-        return {}
-    try:
-        return {name: pickle.dumps(get_observation_type(name))}
-    except (pickle.PicklingError, AttributeError, TypeError) as error:
-        raise ValueError(f"observation type {name!r} cannot be sent to worker processes ({error}); define its class "
-                         "at the top level of an importable module, or evaluate with workers=1") from None
+    return observation_type_for_workers(name)
 
 
 # ---- the whole evaluation ------------------------------------------------------------------------

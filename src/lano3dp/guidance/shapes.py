@@ -28,6 +28,7 @@ from typing import Any
 from lano3dp.errors import EmptyCloudError
 from lano3dp.guidance.exceptions import GuidanceError
 from lano3dp.guidance.settings import SAFETY_MARGIN
+from lano3dp.registry import Registry
 
 OBSTACLE_COLOR = "tab:red"
 
@@ -131,8 +132,11 @@ class PointsShape(ObstacleShape):
         return f"{len(obstacle.points)} segmented points, each a ball of {100 * obstacle.point_radius:.1f} cm"
 
 
-_REGISTRY: dict[str, ObstacleShape] = {"cylinder": CylinderShape(), "box": BoxShape(), "points": PointsShape()}
-BUILTIN_OBSTACLE_SHAPES = tuple(_REGISTRY)
+_REGISTRY: Registry[ObstacleShape] = Registry("obstacle shape", UnknownObstacleShapeError,
+                                              ("fit", "describe", "plot_data", "draw"), "lano3dp.guidance.ObstacleShape")
+for _name, _shape in (("cylinder", CylinderShape()), ("box", BoxShape()), ("points", PointsShape())):
+    _REGISTRY.register(_name, _shape)
+BUILTIN_OBSTACLE_SHAPES = _REGISTRY.mark_builtin()
 # The cost classes the built-in shapes fit, so results saved before they named their shape are still drawn.
 _BUILTIN_BY_COST = {"Cylinder": "cylinder", "OrientedBox": "box", "PointCloudObstacle": "points"}
 
@@ -140,48 +144,28 @@ _BUILTIN_BY_COST = {"Cylinder": "cylinder", "OrientedBox": "box", "PointCloudObs
 def register_obstacle_shape(name: str, shape, *, replace: bool = False) -> ObstacleShape:
     """Make `shape` (an ObstacleShape, or a class of one taking no arguments) available as `name`: to
     `runtime.ObstacleModel(shape=name)`, `ObstacleSettings(shape=name)` (in EvalConfig and RunConfig) and
-    `--obstacle-shape name`.
-
-    Registering a name again with an object of the same class replaces it (a module imported twice); another
-    class needs `replace=True`, so a plug-in cannot silently take over a built-in shape.
-    """
-    if not isinstance(name, str) or not name or name != name.strip() or any(c.isspace() for c in name):
-        raise ValueError(f"an obstacle shape name is a non-empty word without spaces, got {name!r}")
-    if isinstance(shape, type):
-        shape = shape()
-    missing = [method for method in ("fit", "describe", "plot_data", "draw") if not callable(getattr(shape, method,
-                                                                                                    None))]
-    if missing:
-        raise TypeError(f"obstacle shape {name!r} lacks {', '.join(missing)}; subclass "
-                        "lano3dp.guidance.ObstacleShape for the defaults")
-    previous = _REGISTRY.get(name)
-    if previous is not None and type(previous) is not type(shape) and not replace:
-        raise ValueError(f"obstacle shape {name!r} is already registered ({type(previous).__name__}); "
-                         "pass replace=True to replace it")
-    _REGISTRY[name] = shape
-    return shape
+    `--obstacle-shape name` (same-class re-registration replaces; another class needs `replace=True`)."""
+    return _REGISTRY.register(name, shape, replace=replace)
 
 
 def unregister_obstacle_shape(name: str) -> None:
     """Remove a registered shape (the built-in ones stay: configs default to them)."""
-    if name in BUILTIN_OBSTACLE_SHAPES:
-        raise ValueError(f"the built-in obstacle shape {name!r} cannot be removed")
-    get_obstacle_shape(name)
-    del _REGISTRY[name]
+    _REGISTRY.unregister(name)
 
 
 def obstacle_shape_names() -> tuple[str, ...]:
     """Registered names, built-in ones first, then in the order they were registered."""
-    return tuple(_REGISTRY)
+    return _REGISTRY.names()
 
 
 def get_obstacle_shape(name: str) -> ObstacleShape:
     """The shape registered as `name`; UnknownObstacleShapeError naming the registered ones otherwise."""
-    shape = _REGISTRY.get(name)
-    if shape is None:
-        raise UnknownObstacleShapeError(f"unknown obstacle shape {name!r}; registered: "
-                                        f"{', '.join(obstacle_shape_names())}")
-    return shape
+    return _REGISTRY.get(name)
+
+
+def shape_for_workers(name: str) -> dict[str, bytes]:
+    """{name: pickled shape} for a user's shape, {} for a built-in one (spawned workers know the built-ins)."""
+    return _REGISTRY.worker_payload(name)
 
 
 def fit_obstacle(name: str, points, *, held_radius: float = 0.0, margin: float = SAFETY_MARGIN, xy_only: bool = True):
@@ -220,11 +204,11 @@ def shape_of(data: Mapping[str, Any]) -> ObstacleShape | None:
     kind, the built-in shape of its cost class, else of its numbers (a radius: cylinder, corners: box), as
     the top view drew them before."""
     if "kind" in data:  # a shape this process has not registered (a plug-in not imported) is not guessed at
-        return _REGISTRY.get(data["kind"])
+        return _REGISTRY.get(data["kind"]) if data["kind"] in _REGISTRY.names() else None
     name = _BUILTIN_BY_COST.get(data.get("shape", ""))
     if name is None:
         name = "cylinder" if "radius" in data else "box" if "corners" in data else None
-    return None if name is None else _REGISTRY[name]
+    return None if name is None else _REGISTRY.get(name)
 
 
 def draw_obstacle(ax, data: Mapping[str, Any], *, label: str | None = None) -> list:

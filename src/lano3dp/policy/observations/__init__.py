@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from lano3dp.errors import Lano3dpError
+from lano3dp.registry import Registry
 
 if TYPE_CHECKING:
     import numpy as np
@@ -120,60 +121,48 @@ class ObservationType:
                              f"got {config.obs_type!r}")
 
 
-_REGISTRY: dict[str, ObservationType] = {}
+def _check_key(name: str, observation_type) -> None:
+    if not isinstance(getattr(observation_type, "key", None), str) or not observation_type.key:
+        raise TypeError(f"observation type {name!r} needs a key (its dataset and observation key)")
+
+
+_REGISTRY: Registry[ObservationType] = Registry(
+    "observation type", UnknownObservationTypeError,
+    ("encoder", "runtime_input", "recorder", "normalizer_dim", "cloud_points", "dataset_fields", "validate"),
+    "lano3dp.policy.ObservationType", check=_check_key, field="obs_type",
+    hint=" (a policy of another type needs its module imported first: lano3dp.policy.register_observation_type)")
 
 
 def register_observation_type(name: str, observation_type, *, replace: bool = False) -> ObservationType:
     """Make `observation_type` (an ObservationType, or a class of one taking no arguments) available as
-    `PolicyConfig(obs_type=name)`.
-
-    Registering a name again with an object of the same class replaces it (a module imported twice); another
-    class needs `replace=True`, so a plug-in cannot silently take over a built-in type.
-    """
-    if not isinstance(name, str) or not name or any(c.isspace() for c in name):
-        raise ValueError(f"an observation type name is a non-empty word without spaces, got {name!r}")
-    if isinstance(observation_type, type):
-        observation_type = observation_type()
-    missing = [m for m in ("encoder", "runtime_input", "recorder", "normalizer_dim", "cloud_points",
-                           "dataset_fields", "validate") if not callable(getattr(observation_type, m, None))]
-    if missing or not isinstance(getattr(observation_type, "key", None), str) or not observation_type.key:
-        raise TypeError(f"observation type {name!r} needs a key and {', '.join(missing) or 'its methods'}; "
-                        "subclass lano3dp.policy.ObservationType for the defaults")
-    previous = _REGISTRY.get(name)
-    if previous is not None and type(previous) is not type(observation_type) and not replace:
-        raise ValueError(f"observation type {name!r} is already registered ({type(previous).__name__}); "
-                         "pass replace=True to replace it")
-    _REGISTRY[name] = observation_type
-    return observation_type
+    `PolicyConfig(obs_type=name)` (same-class re-registration replaces; another class needs `replace=True`)."""
+    return _REGISTRY.register(name, observation_type, replace=replace)
 
 
 def unregister_observation_type(name: str) -> None:
     """Remove a registered type (the built-in ones stay: configs and checkpoints default to them)."""
-    if name in BUILTIN_OBSERVATION_TYPES:
-        raise ValueError(f"the built-in observation type {name!r} cannot be removed")
-    get_observation_type(name)
-    del _REGISTRY[name]
+    _REGISTRY.unregister(name)
 
 
 def observation_type_names() -> tuple[str, ...]:
     """Registered names, built-in ones first, then in the order they were registered."""
-    return tuple(_REGISTRY)
+    return _REGISTRY.names()
 
 
 def get_observation_type(name: str) -> ObservationType:
     """The type registered as `name`; UnknownObservationTypeError naming the registered ones otherwise."""
-    observation_type = _REGISTRY.get(name)
-    if observation_type is None:
-        raise UnknownObservationTypeError(
-            f"unknown obs_type {name!r}; registered: {', '.join(observation_type_names())} (a policy of another "
-            "type needs its module imported first: lano3dp.policy.register_observation_type)")
-    return observation_type
+    return _REGISTRY.get(name)
+
+
+def observation_type_for_workers(name: str) -> dict[str, bytes]:
+    """{name: pickled type} for a user's type, {} for a built-in one (spawned workers know the built-ins)."""
+    return _REGISTRY.worker_payload(name)
 
 
 def recorders(context: RecordContext) -> dict[str, Recorder]:
     """{key: recorder} for one episode: every registered type's that records, the first type of a key winning."""
     found: dict[str, Recorder] = {}
-    for observation_type in _REGISTRY.values():
+    for observation_type in _REGISTRY:
         if observation_type.key not in found:
             recorder = observation_type.recorder(context)
             if recorder is not None:
@@ -194,7 +183,7 @@ def _register_builtins() -> tuple[str, ...]:
     for name, observation_type in (("objects", ObjectCloudsObservation()), ("scene", SceneCloudObservation()),
                                    ("image", ImageObservation())):
         register_observation_type(name, observation_type)
-    return tuple(_REGISTRY)
+    return _REGISTRY.mark_builtin()
 
 
 BUILTIN_OBSERVATION_TYPES = _register_builtins()

@@ -48,8 +48,8 @@ from lano3dp.guidance import (
     Densified,
     GuidanceConfig,
     GuidanceMode,
-    MetricGradient,
     checked_sample,
+    obstacle_guidance_cost,
 )
 from lano3dp.guidance.diagnostics import plot_trajectories_by_scale
 from lano3dp.policy import DiffusionPolicy, PolicyConfig
@@ -231,10 +231,8 @@ class Setting:
 
 
 def make_cost(kind: str, obstacle: Cylinder, policy: DiffusionPolicy):
-    if kind == "paper":
-        return obstacle
-    base = Densified(obstacle, 4) if kind == "metric+dense" else obstacle
-    return MetricGradient(base, policy.normalizer.scale("action")[:3])
+    return obstacle_guidance_cost([obstacle], densify=4 if kind == "metric+dense" else 1,
+                                  action_scale=None if kind == "paper" else policy.normalizer.scale("action")[:3])
 
 
 def sample(policy, obs, setting: Setting, cost, seed: int):

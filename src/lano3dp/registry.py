@@ -68,7 +68,8 @@ class Registry(Generic[T]):
     def get(self, name: str) -> T:
         entry = self._entries.get(name)
         if entry is None:
-            raise self.not_found(f"unknown {self.field or self.kind} {name!r}; registered: {', '.join(self.names())}{self.hint}")
+            raise self.not_found(f"unknown {self.field or self.kind} {name!r}; "
+                                 f"registered: {', '.join(self.names())}{self.hint}")
         return entry
 
     def __iter__(self) -> Iterator[T]:

@@ -42,13 +42,7 @@ from lano3dp.errors import EmptyCloudError, Lano3dpError
 from lano3dp.geometry.frame import RGBDFrame, observe
 from lano3dp.geometry.rotations import quat_to_rot6d, rot6d_to_quat, slerp
 from lano3dp.guidance.checked import CheckConfig, checked_sample
-from lano3dp.guidance.costs import (
-    Densified,
-    MetricGradient,
-    ObstacleSet,
-    PositionCost,
-    SweptBody,
-)
+from lano3dp.guidance.costs import ObstacleSet, PositionCost, obstacle_guidance_cost
 from lano3dp.guidance.fitting import fit_cylinder
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
 from lano3dp.guidance.settings import BODY_MODELS, GUIDANCE_PRESETS, SAFETY_MARGIN, GuidanceSettings, ObstacleSettings
@@ -498,15 +492,12 @@ class PolicyRunner:
 
     def guidance_cost(self, frame: RGBDFrame, state: np.ndarray) -> PositionCost:
         """The cost guidance descends for the next chunk: the fitted obstacles against the body model."""
-        cost: PositionCost = self.obstacles
-        if self.config.obstacle.body == "swept":
-            offsets, radii = self.swept_body(frame, state)
-            cost = ObstacleSet([SweptBody(obstacle, offsets, radii) for obstacle in self.obstacles])
-            self.held_radius = cost.obstacles[0].reach
-        if self.config.densify > 1:
-            cost = Densified(cost, self.config.densify)
-        if self.config.metric_gradient:
-            cost = MetricGradient(cost, self.policy.normalizer.scale("action")[:3])
+        body = self.swept_body(frame, state) if self.config.obstacle.body == "swept" else None
+        metric_scale = self.policy.normalizer.scale("action")[:3] if self.config.metric_gradient else None
+        cost = obstacle_guidance_cost(list(self.obstacles), body=body, densify=self.config.densify,
+                                      action_scale=metric_scale)
+        if body is not None:
+            self.held_radius = float((np.linalg.norm(body[0], axis=1) + body[1]).max())
         return cost
 
     # ---- acting ----------------------------------------------------------------------------

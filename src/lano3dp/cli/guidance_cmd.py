@@ -56,7 +56,7 @@ def guidance_figures(
     import torch
 
     from lano3dp.cli import _options
-    from lano3dp.guidance import Cylinder, Densified, GuidanceConfig, GuidanceMode, MetricGradient
+    from lano3dp.guidance import Cylinder, GuidanceConfig, GuidanceMode, obstacle_guidance_cost
     from lano3dp.guidance.diagnostics import DenoiseRecorder, plot_denoising, plot_trajectories_by_scale
 
     _options.output_path(out, folder=True)
@@ -78,10 +78,8 @@ def guidance_figures(
             raise typer.BadParameter("give --checkpoint and --data, or --analytic")
         sample_chunk, to_metric, label, action_scale = _policy_sampler(checkpoint, data, episode, step, scheduler,
                                                                        steps, samples)
-    cost = obstacle_cost
-    if cost_kind != "paper":
-        cost = MetricGradient(Densified(obstacle_cost, 4) if cost_kind == "metric+dense" else obstacle_cost,
-                              action_scale)
+    cost = obstacle_guidance_cost([obstacle_cost], densify=4 if cost_kind == "metric+dense" else 1,
+                                  action_scale=None if cost_kind == "paper" else action_scale)
 
     def config(guide_mode, scale):
         return GuidanceConfig(guide_mode, scale, last_steps, push_weight=push_weight, guided_clip_range=clip_range)

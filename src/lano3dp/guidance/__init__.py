@@ -15,6 +15,7 @@ _EXPORTS = {
     "Cylinder": "costs", "Densified": "costs", "MetricGradient": "costs", "Obstacle": "costs",
     "ObstacleSet": "costs", "OrientedBox": "costs", "PointCloudObstacle": "costs", "PositionCost": "costs",
     "Sphere": "costs", "SweptBody": "costs", "densify": "costs", "min_clearance": "costs",
+    "obstacle_guidance_cost": "costs",
     "CollisionError": "exceptions", "GuidanceError": "exceptions",
     "fit_box": "fitting", "fit_cylinder": "fitting",
     "DenoiseStep": "sampler", "GuidanceConfig": "sampler", "GuidanceMode": "sampler", "denoise": "sampler",
@@ -30,7 +31,8 @@ __all__ = [
     "GuidanceError", "GuidanceMode", "GuidanceSettings", "MetricGradient", "Obstacle", "ObstacleSet",
     "ObstacleSettings", "ObstacleShape", "OrientedBox",
     "PointCloudObstacle", "PositionCost", "Sphere", "SweptBody", "UnknownObstacleShapeError", "checked_sample",
-    "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "min_clearance", "obstacle_shape_names",
+    "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "min_clearance", "obstacle_guidance_cost",
+    "obstacle_shape_names",
     "register_obstacle_shape", "unregister_obstacle_shape",
 ]
 
@@ -49,6 +51,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
         SweptBody,
         densify,
         min_clearance,
+        obstacle_guidance_cost,
     )
     from lano3dp.guidance.exceptions import CollisionError, GuidanceError
     from lano3dp.guidance.fitting import fit_box, fit_cylinder

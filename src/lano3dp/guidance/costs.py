@@ -409,6 +409,28 @@ class MetricGradient:
         return f"MetricGradient({self.cost!r}, weight={self.weight.tolist()})"
 
 
+def obstacle_guidance_cost(obstacles: Sequence[PositionCost], *, body: tuple[np.ndarray, np.ndarray] | None = None,
+                  densify: int = 1, action_scale=None) -> PositionCost:
+    """The one recipe from fitted obstacles to the cost guidance descends (runtime, `guidance-figures`, benches).
+
+    Args:
+        obstacles: fitted obstacle costs (their safety distance already holds any held radius).
+        body: (K, 3) offsets from the EE point and (K,) radii of what moves with it (`SweptBody`); None: the EE
+            point alone.
+        densify: points per path segment the cost sees (`Densified`; 1: the waypoints only, the paper's).
+        action_scale: the normaliser's position scale s (1/m) for an isotropic push in metres (`MetricGradient`);
+            None: the paper's push in normalised units.
+    """
+    if body is not None:
+        obstacles = [SweptBody(obstacle, *body) for obstacle in obstacles]
+    cost: PositionCost = ObstacleSet(list(obstacles))
+    if densify > 1:
+        cost = Densified(cost, densify)
+    if action_scale is not None:
+        cost = MetricGradient(cost, action_scale)
+    return cost
+
+
 def min_clearance(cost: PositionCost, positions: torch.Tensor) -> torch.Tensor:
     """(B, T, 3) -> (B,) the smallest clearance (m) along each trajectory, without gradients."""
     with torch.no_grad():

@@ -133,7 +133,8 @@ class PointsShape(ObstacleShape):
 
 
 _REGISTRY: Registry[ObstacleShape] = Registry("obstacle shape", UnknownObstacleShapeError,
-                                              ("fit", "describe", "plot_data", "draw"), "lano3dp.guidance.ObstacleShape")
+                                              ("fit", "describe", "plot_data", "draw"),
+                                              "lano3dp.guidance.ObstacleShape")
 for _name, _shape in (("cylinder", CylinderShape()), ("box", BoxShape()), ("points", PointsShape())):
     _REGISTRY.register(_name, _shape)
 BUILTIN_OBSTACLE_SHAPES = _REGISTRY.mark_builtin()

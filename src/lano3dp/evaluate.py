@@ -115,7 +115,7 @@ class EvalConfig:
         guidance: how chunks are guided (`guidance.GuidanceSettings`; its defaults are the recommended preset);
             a mode name ("none", "noisy", "clean") is that preset in that mode. Default: mode "none".
         obstacle: how obstacles become costs (`guidance.ObstacleSettings`: shape, margin, body, held radius,
-            re-fitting before every chunk; see `runtime.ObstacleModel`).
+            re-fitting before every chunk; see `guidance.obstacle_model.ObstacleModel`).
         perception: segmenter, detector and its weights, camera resolution (`PerceptionSettings`).
         scheduler, steps: inference scheduler and its number of denoising steps (None: the policy's default).
         n_action_steps: actions executed per chunk (None: the policy's).

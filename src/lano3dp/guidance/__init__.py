@@ -15,7 +15,7 @@ _EXPORTS = {
     "Cylinder": "costs", "Densified": "costs", "MetricGradient": "costs", "Obstacle": "costs",
     "ObstacleSet": "costs", "OrientedBox": "costs", "PointCloudObstacle": "costs", "PositionCost": "costs",
     "Sphere": "costs", "SweptBody": "costs", "densify": "costs", "min_clearance": "costs",
-    "obstacle_guidance_cost": "costs",
+    "obstacle_guidance_cost": "costs", "ObstacleModel": "obstacle_model",
     "CollisionError": "exceptions", "GuidanceError": "exceptions",
     "fit_box": "fitting", "fit_cylinder": "fitting",
     "DenoiseStep": "sampler", "GuidanceConfig": "sampler", "GuidanceMode": "sampler", "denoise": "sampler",
@@ -29,7 +29,7 @@ __all__ = [
     "GUIDANCE_PRESETS", "SAFETY_MARGIN", "CheckConfig", "CheckedResult", "CollisionError", "Cylinder", "DenoiseStep",
     "Densified", "GuidanceConfig",
     "GuidanceError", "GuidanceMode", "GuidanceSettings", "MetricGradient", "Obstacle", "ObstacleSet",
-    "ObstacleSettings", "ObstacleShape", "OrientedBox",
+    "ObstacleModel", "ObstacleSettings", "ObstacleShape", "OrientedBox",
     "PointCloudObstacle", "PositionCost", "Sphere", "SweptBody", "UnknownObstacleShapeError", "checked_sample",
     "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "min_clearance", "obstacle_guidance_cost",
     "obstacle_shape_names",
@@ -55,6 +55,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
     )
     from lano3dp.guidance.exceptions import CollisionError, GuidanceError
     from lano3dp.guidance.fitting import fit_box, fit_cylinder
+    from lano3dp.guidance.obstacle_model import ObstacleModel
     from lano3dp.guidance.sampler import DenoiseStep, GuidanceConfig, GuidanceMode, denoise
     from lano3dp.guidance.settings import GUIDANCE_PRESETS, SAFETY_MARGIN, GuidanceSettings, ObstacleSettings
     from lano3dp.guidance.shapes import (

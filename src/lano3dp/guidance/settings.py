@@ -88,7 +88,7 @@ GUIDANCE_PRESETS: dict[str, GuidanceSettings] = {
 
 @dataclass(frozen=True)
 class ObstacleSettings:
-    """How obstacles become costs (the fields of `runtime.ObstacleModel` a user chooses).
+    """How obstacles become costs (the fields of `guidance.obstacle_model.ObstacleModel` a user chooses).
 
     Attributes:
         shape: the registered shape fitted to each obstacle's points: "cylinder" (the paper), "box", "points",

@@ -144,8 +144,8 @@ _BUILTIN_BY_COST = {"Cylinder": "cylinder", "OrientedBox": "box", "PointCloudObs
 
 def register_obstacle_shape(name: str, shape, *, replace: bool = False) -> ObstacleShape:
     """Make `shape` (an ObstacleShape, or a class of one taking no arguments) available as `name`: to
-    `runtime.ObstacleModel(shape=name)`, `ObstacleSettings(shape=name)` (in EvalConfig and RunConfig) and
-    `--obstacle-shape name` (same-class re-registration replaces; another class needs `replace=True`)."""
+    `guidance.obstacle_model.ObstacleModel(shape=name)`, `ObstacleSettings(shape=name)` (in EvalConfig and
+    RunConfig) and `--obstacle-shape name` (same-class re-registration replaces; another class needs `replace=True`)."""
     return _REGISTRY.register(name, shape, replace=replace)
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "lano3dp"
 LAYERS = (
-    ("errors", "registry", "geometry"),
+    ("errors", "registry", "video", "geometry"),
     ("data", "perception", "language", "guidance", "policy", "mujoco_frame", "wrappers"),
     ("sim",),
     ("runtime", "train", "evaluate", "env_factory", "pipeline", "executor", "augment", "locking", "report"),

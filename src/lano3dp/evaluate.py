@@ -46,6 +46,7 @@ import numpy as np
 from lano3dp import env_factory
 from lano3dp.errors import Lano3dpError
 from lano3dp.guidance.settings import GUIDANCE_PRESETS, GuidanceSettings, ObstacleSettings  # noqa: F401 (re-export)
+from lano3dp.video import write_video
 
 DEFAULT_EVAL_SEED = 1_000_000
 SUMMARY_FIELDS = ("episodes", "success_rate", "collision_rate", "safe_success_rate", "error_rate",
@@ -340,20 +341,6 @@ def carried_slot_word(task: str) -> str | None:
         return None
     spec = registry.get(task)
     return None if spec.carried_slot is None else spec.slot_words[spec.carried_slot]
-
-
-def write_video(path: str | Path, frames: Sequence[np.ndarray], fps: int = 10) -> Path:
-    """Frames (H, W, 3) uint8 -> an MP4 (H.264 via imageio-ffmpeg); a GIF when the path ends in .gif."""
-    import imageio.v2 as imageio
-
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    if path.suffix == ".gif":
-        imageio.mimsave(path, list(frames), duration=1000 / fps, loop=0)
-    else:
-        # macro_block_size=1 keeps odd sizes as they are instead of resizing with a warning
-        imageio.mimsave(path, list(frames), fps=fps, macro_block_size=1)
-    return path
 
 
 _WORKER: EpisodeRunner | None = None

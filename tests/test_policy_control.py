@@ -118,3 +118,51 @@ def test_a_window_or_a_changed_batch_is_refused_with_what_to_do():
         policy.select_action(bigger, **FAST)
     with pytest.raises(KeyError, match="missing 'state'"):
         policy.select_action({"object_clouds": obs["object_clouds"]}, **FAST)
+
+
+def test_a_sample_function_replaces_the_sampler_and_decides_how_many_actions_are_queued():
+    """A control loop that guides or checks its chunks passes `sample`: the window is still the policy's."""
+    policy = make_policy()
+    calls = CountingPolicy(policy)
+    noise = torch.randn(1, 16, 10, generator=torch.Generator().manual_seed(0))
+    windows = []
+
+    def sample(obs_window):
+        windows.append(obs_window)
+        chunk = policy.predict_action_chunk(obs_window, initial_noise=noise, **FAST)
+        return chunk._replace(actions=chunk.actions[:, :3])  # run 3 actions, then re-plan
+
+    observations = [one_step(policy.config, seed) for seed in range(4)]
+    actions = [policy.select_action(obs, sample=sample) for obs in observations]
+    assert len(windows) == 2  # calls 0 and 3
+    assert torch.equal(windows[0]["state"], torch.as_tensor(window(observations[0], observations[0])["state"]))
+    assert torch.equal(windows[1]["state"], torch.as_tensor(window(observations[2], observations[3])["state"]))
+    first = policy.predict_action_chunk(window(observations[0], observations[0]), initial_noise=noise, **FAST)
+    assert all(torch.equal(actions[i], first.actions[:, i]) for i in range(3))
+    assert policy.last_chunk.actions.shape == (1, 3, 10)  # what the sample function returned
+    assert len(calls.windows) == 3  # through `sample` (2 chunks) and `first`: select_action sampled nothing itself
+    with pytest.raises(TypeError, match="give the options to the sample function"):
+        policy.select_action(observations[0], sample=sample, generator=torch.Generator())
+
+
+def test_chunked_control_gives_any_chunk_sampler_the_control_contract():
+    """A wrapper or a test double with config, device and predict_action_chunk gets reset / select_action."""
+    from lano3dp.policy import ChunkedControl, DiffusionPolicy
+
+    inner = make_policy()
+
+    class Wrapper(ChunkedControl):
+        def __init__(self):
+            self.config, self.device = inner.config, inner.device
+            self.reset()
+
+        def predict_action_chunk(self, obs, **kwargs):
+            return inner.predict_action_chunk(obs, **kwargs)
+
+    noise = torch.randn(1, 16, 10, generator=torch.Generator().manual_seed(2))
+    observations = [one_step(inner.config, seed) for seed in range(9)]
+    wrapper = Wrapper()
+    wrapped = [wrapper.select_action(obs, initial_noise=noise, **FAST) for obs in observations]
+    own = [inner.select_action(obs, initial_noise=noise, **FAST) for obs in observations]
+    assert all(torch.equal(a, b) for a, b in zip(wrapped, own, strict=True))
+    assert isinstance(inner, ChunkedControl) and DiffusionPolicy.select_action is ChunkedControl.select_action

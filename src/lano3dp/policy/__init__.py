@@ -2,7 +2,7 @@
 registry of observation types (`policy.observations`)."""
 
 from lano3dp.policy.config import DOWN_DIMS_PRESETS, PolicyConfig, down_dims_for
-from lano3dp.policy.modeling import ActionChunk, DiffusionPolicy, make_scheduler
+from lano3dp.policy.modeling import ActionChunk, ChunkedControl, ControlPolicy, DiffusionPolicy, make_scheduler
 from lano3dp.policy.normalizer import LinearNormalizer, NormalizerNotFittedError
 from lano3dp.policy.observations import (
     ObservationType,
@@ -16,6 +16,8 @@ from lano3dp.policy.observations import (
 __all__ = [
     "DOWN_DIMS_PRESETS",
     "ActionChunk",
+    "ChunkedControl",
+    "ControlPolicy",
     "DiffusionPolicy",
     "LinearNormalizer",
     "NormalizerNotFittedError",

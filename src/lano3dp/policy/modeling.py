@@ -2,7 +2,8 @@
 
 Training: `compute_loss` (epsilon prediction, Chi et al.). Inference: `predict_action_chunk`, whose
 denoising loop is `lano3dp.guidance.sampler.denoise`, so guided and unguided sampling share one loop;
-`reset` / `select_action` are the control-loop contract (LeRobot's): one observation in, one action out.
+`reset` / `select_action` are the control-loop contract (LeRobot's): one observation in, one action out; the
+policy owns the observation window and the action queue (`ChunkedControl`, `ControlPolicy`).
 Checkpoints are folders: config.json + model.safetensors (weights and normaliser statistics) +
 normalizer.json (the same statistics, human-readable); loading never unpickles.
 """
@@ -14,7 +15,7 @@ import os
 from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numpy as np
 import torch
@@ -74,12 +75,108 @@ def make_scheduler(config: PolicyConfig, kind: str):
     raise ValueError(f"unknown scheduler {kind!r}; use 'ddpm' or 'ddim'")
 
 
-class DiffusionPolicy(nn.Module):
+SampleFn = Callable[[dict[str, torch.Tensor]], ActionChunk]
+
+
+class ControlPolicy(Protocol):
+    """What a control loop (`runtime.PolicyRunner`) drives: a chunk sampler with LeRobot's control contract.
+
+    config: the PolicyConfig (obs_keys, n_obs_steps, n_action_steps, horizon, time_stride, ...).
+    predict_action_chunk(window, **sample_kwargs): sample an ActionChunk from observation windows (B, To, ...).
+    reset(): start an episode: forget the observation window and the queued actions.
+    select_action(obs, sample=None, **sample_kwargs): one observation (B, ...) in, one (B, action_dim) action out;
+        `sample(window) -> ActionChunk`, when given, samples the chunk instead of predict_action_chunk.
+
+    `ChunkedControl` provides reset / select_action for any class with config, device and predict_action_chunk.
+    """
+
+    config: PolicyConfig
+
+    def predict_action_chunk(self, obs: Mapping[str, np.ndarray | torch.Tensor], **sample_kwargs) -> ActionChunk: ...
+
+    def reset(self) -> None: ...
+
+    def select_action(self, obs: Mapping[str, np.ndarray | torch.Tensor], sample: SampleFn | None = None,
+                      **sample_kwargs) -> torch.Tensor: ...
+
+
+class ChunkedControl:
+    """The control contract (`reset`, `select_action`) on top of `predict_action_chunk`: the observation window
+    and the action queue live here, so every control loop (a user's, `runtime.PolicyRunner`) pads, slides and
+    re-plans the same way. The class using it provides `config` (PolicyConfig), `device` and
+    `predict_action_chunk`; `DiffusionPolicy` does, and so can a wrapper or a test double.
+    """
+
+    config: PolicyConfig
+    device: torch.device
+
+    def reset(self) -> None:
+        """Start a new episode: forget the observation window, the queued actions and the last chunk."""
+        self._obs_queue: dict[str, deque[torch.Tensor]] = {key: deque(maxlen=self.config.n_obs_steps)
+                                                          for key in self.config.obs_keys}
+        self._action_queue: deque[torch.Tensor] = deque()
+        self.last_chunk: ActionChunk | None = None
+
+    def select_action(self, obs: Mapping[str, np.ndarray | torch.Tensor], sample: SampleFn | None = None,
+                      **sample_kwargs) -> torch.Tensor:
+        """One control step: push one observation, sample a chunk when no action is queued, pop one action.
+
+        The window holds the last n_obs_steps observations; the first observation of an episode fills it
+        (Diffusion Policy's edge padding, as training windows are padded). A chunk's actions are executed one
+        per call before the next chunk is sampled, so a new chunk is sampled every n_action_steps calls;
+        `last_chunk` keeps it (its trajectory, for drawing or checking).
+
+        Args:
+            obs: one step, numpy or torch, raw units: {visual key: (B, ...) e.g. object_clouds (B, K, N, 3)
+                metres, "state": (B, 11)}; other keys are ignored.
+            sample: window {key: (B, To, ...) tensors} -> ActionChunk, called instead of predict_action_chunk
+                when a chunk is due; its `actions` are the ones queued, so it also decides how many run before
+                the next chunk (a control loop that guides, checks or records its chunks passes it).
+            **sample_kwargs: passed to predict_action_chunk when a chunk is sampled (guidance, position_cost,
+                generator, scheduler, num_inference_steps, ...); not with `sample`.
+
+        Returns:
+            (B, action_dim) un-normalised action on the policy's device.
+        """
+        if sample is not None and sample_kwargs:
+            raise TypeError(f"select_action got both a sample function and sampling options {sorted(sample_kwargs)}; "
+                            "give the options to the sample function")
+        for key in self.config.obs_keys:
+            if key not in obs:
+                raise KeyError(f"observation is missing {key!r}; a {self.config.obs_type!r} policy needs "
+                               f"{self.config.obs_keys}")
+        step = {key: torch.as_tensor(obs[key], device=self.device) for key in self.config.obs_keys}
+        if step["state"].ndim != 2 or step["state"].shape[-1] != self.config.state_dim:
+            raise ValueError(f"select_action takes one step: state must be (batch, {self.config.state_dim}), got "
+                             f"{tuple(step['state'].shape)}; pass windows to predict_action_chunk instead")
+        for key, value in step.items():
+            queue = self._obs_queue[key]
+            if queue and queue[-1].shape != value.shape:
+                raise ValueError(f"{key} changed shape from {tuple(queue[-1].shape)} to {tuple(value.shape)} "
+                                 "within an episode; call reset() first")
+            if not queue:
+                queue.extend([value] * self.config.n_obs_steps)
+            else:
+                queue.append(value)
+        if not self._action_queue:
+            window = {key: torch.stack(list(queue), dim=1) for key, queue in self._obs_queue.items()}
+            chunk = sample(window) if sample is not None else self.predict_action_chunk(window, **sample_kwargs)
+            if chunk.actions.shape[1] < 1:
+                raise ValueError(f"the sampled chunk holds no actions (actions {tuple(chunk.actions.shape)})")
+            self.last_chunk = chunk
+            self._action_queue.extend(chunk.actions.transpose(0, 1))  # Ta tensors of (B, D)
+        return self._action_queue.popleft()
+
+
+class DiffusionPolicy(ChunkedControl, nn.Module):
     """Object-centric 3D diffusion policy (or a baseline, by `config.obs_type`).
 
     Observations: {"object_clouds": (B, To, K, N, 3) metres, world frame, slots in config.object_names order;
     "state": (B, To, 11)}; the baselines use "scene_cloud" (B, To, N, 3) or "rgb" (B, To, H, W, 3) uint8, and a
     registered observation type its own key (`policy.observations`).
+
+    Control: `reset` / `select_action` (from `ChunkedControl`) run it one observation at a time;
+    `predict_action_chunk` samples from whole windows (planning, guidance, batches).
     """
 
     def __init__(self, config: PolicyConfig):
@@ -254,54 +351,6 @@ class DiffusionPolicy(nn.Module):
             self.train(was_training)
         start = config.n_obs_steps - 1
         return ActionChunk(trajectory[:, start:start + config.n_action_steps], trajectory)
-
-    # ---- control loop ------------------------------------------------------------------
-    def reset(self) -> None:
-        """Start a new episode: forget the observation window, the queued actions and the last chunk."""
-        self._obs_queue: dict[str, deque[torch.Tensor]] = {key: deque(maxlen=self.config.n_obs_steps)
-                                                          for key in self.config.obs_keys}
-        self._action_queue: deque[torch.Tensor] = deque()
-        self.last_chunk: ActionChunk | None = None
-
-    def select_action(self, obs: Mapping[str, np.ndarray | torch.Tensor], **sample_kwargs) -> torch.Tensor:
-        """One control step: push one observation, sample a chunk when no action is queued, pop one action.
-
-        The window holds the last n_obs_steps observations; the first observation of an episode fills it
-        (Diffusion Policy's edge padding, as training windows are padded). A chunk's n_action_steps actions
-        are executed one per call before the next chunk is sampled, so a new chunk is sampled every
-        n_action_steps calls; `last_chunk` keeps it (its trajectory, for drawing or checking).
-
-        Args:
-            obs: one step, numpy or torch, raw units: {visual key: (B, ...) e.g. object_clouds (B, K, N, 3)
-                metres, "state": (B, 11)}; other keys are ignored.
-            **sample_kwargs: passed to predict_action_chunk when a chunk is sampled (guidance, position_cost,
-                generator, scheduler, num_inference_steps, ...).
-
-        Returns:
-            (B, action_dim) un-normalised action on the policy's device.
-        """
-        for key in self.config.obs_keys:
-            if key not in obs:
-                raise KeyError(f"observation is missing {key!r}; a {self.config.obs_type!r} policy needs "
-                               f"{self.config.obs_keys}")
-        step = {key: torch.as_tensor(obs[key], device=self.device) for key in self.config.obs_keys}
-        if step["state"].ndim != 2 or step["state"].shape[-1] != self.config.state_dim:
-            raise ValueError(f"select_action takes one step: state must be (batch, {self.config.state_dim}), got "
-                             f"{tuple(step['state'].shape)}; pass windows to predict_action_chunk instead")
-        for key, value in step.items():
-            queue = self._obs_queue[key]
-            if queue and queue[-1].shape != value.shape:
-                raise ValueError(f"{key} changed shape from {tuple(queue[-1].shape)} to {tuple(value.shape)} "
-                                 "within an episode; call reset() first")
-            if not queue:
-                queue.extend([value] * self.config.n_obs_steps)
-            else:
-                queue.append(value)
-        if not self._action_queue:
-            window = {key: torch.stack(list(queue), dim=1) for key, queue in self._obs_queue.items()}
-            self.last_chunk = self.predict_action_chunk(window, **sample_kwargs)
-            self._action_queue.extend(self.last_chunk.actions.transpose(0, 1))  # Ta tensors of (B, D)
-        return self._action_queue.popleft()
 
     # ---- persistence -------------------------------------------------------------------
     def save_pretrained(self, directory: str | Path) -> Path:

@@ -128,7 +128,7 @@ def test_a_closed_loop_episode_guides_against_the_new_shape_and_reports_it(ball)
     from lano3dp.geometry.rotations import matrix_to_rot6d
     from lano3dp.perception import ObjectObserver, SimOracleSegmenter
     from lano3dp.perception.synthetic import Box, render_boxes, top_down_camera
-    from lano3dp.policy import ActionChunk, PolicyConfig
+    from lano3dp.policy import ActionChunk, ChunkedControl, PolicyConfig
     from lano3dp.runtime import PolicyRunner, RuntimeConfig, rollout
 
     boxes = [Box("bowl", (-0.25, 0.0), (0.10, 0.10, 0.05), {"kind": "bowl", "role": "target"}),
@@ -143,8 +143,9 @@ def test_a_closed_loop_episode_guides_against_the_new_shape_and_reports_it(ball)
         def step(self, action):
             return {"frame": frame, "state": state}, 0.0, False, False, {}
 
-    class StillPolicy:
+    class StillPolicy(ChunkedControl):
         config = PolicyConfig(obs_type="objects", object_names=("bowl",), n_obs_steps=1, horizon=8, n_action_steps=4)
+        device = torch.device("cpu")
         costs: list = []
 
         def predict_action_chunk(self, obs, *, position_cost=None, **_):

@@ -3,7 +3,8 @@
 The scene is analytic (perception.synthetic boxes seen from above) and goes through the real
 ground-truth segmenter and ObjectObserver, so the obstacle -> cylinder -> Q* wiring is the real one.
 The fake policy draws a straight line from the EE to the pan; when guided it descends the cost it is
-handed, as the guided sampler would, so guidance visibly bends the path.
+handed, as the guided sampler would, so guidance visibly bends the path. Its observation window and action
+queue are the real ones (`ChunkedControl`), as the runner drives every policy through `select_action`.
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from lano3dp.geometry.rotations import matrix_to_rot6d
 from lano3dp.guidance import CheckConfig, Cylinder, Densified, GuidanceConfig, MetricGradient
 from lano3dp.perception import ObjectNotFoundError, ObjectObserver, SimOracleSegmenter
 from lano3dp.perception.synthetic import Box, render_boxes, top_down_camera
-from lano3dp.policy import ActionChunk, PolicyConfig
+from lano3dp.policy import ActionChunk, ChunkedControl, PolicyConfig
 from lano3dp.policy.normalizer import LinearNormalizer
 from lano3dp.runtime import (
     ClosedLoopError,
@@ -86,7 +87,7 @@ class FakeEnv:
         return self._obs(), float(info["success"]), info["success"], self.steps >= self.max_steps, info
 
 
-class FakePolicy:
+class FakePolicy(ChunkedControl):
     """Straight line from the current EE position to the pan centroid, STEP metres per waypoint.
 
     With guidance it runs gradient descent on the given position cost over the waypoints (a stand-in for
@@ -94,6 +95,7 @@ class FakePolicy:
     """
 
     STEP = 0.05
+    device = torch.device("cpu")
 
     def __init__(self, obs_type: str = "objects", n_action_steps: int = 8):
         kwargs = {"object_names": ("bowl", "pan")} if obs_type == "objects" else {}
@@ -103,6 +105,7 @@ class FakePolicy:
         low, high = np.array([0.2, -0.3, 0.1] + [-1] * 6 + [0]), np.array([0.6, 0.3, 0.4] + [1] * 6 + [1])
         self.normalizer = LinearNormalizer({"action": 10})
         self.normalizer.set_stats({"action": {"min": low, "max": high}})
+        self.reset()
 
     def predict_action_chunk(self, obs, *, guidance=None, position_cost=None, scheduler=None,
                              num_inference_steps=None, generator=None):
@@ -141,21 +144,40 @@ def observer():
     return ObjectObserver(SimOracleSegmenter(), n_points=64, min_points=5)
 
 
-def test_window_repeats_the_first_observation_until_full_then_slides(observer):
+def test_the_policy_samples_from_its_window_of_the_runners_observations(observer):
+    """The window is the policy's (`select_action`): the first observation fills it, later ones slide it."""
     env = FakeEnv([BOWL, PAN])
-    runner = PolicyRunner(FakePolicy(), observer)
+    policy = FakePolicy()
+    runner = PolicyRunner(policy, observer, RuntimeConfig(n_action_steps=1))  # a chunk every step
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
-    runner.push(frame, state)
-    window = runner.policy_obs()
+    runner.act(frame, state)
+    window = policy.calls[0]["obs"]
     assert window["object_clouds"].shape == (1, 2, 2, 64, 3)
     assert window["state"].shape == (1, 2, 11)
     np.testing.assert_array_equal(window["state"][0, 0], window["state"][0, 1])
     for x in (0.1, 0.2):
-        runner.push(frame, np.concatenate([[x, 0, 0.25], ROT6D, [0.04, 1.0]]).astype(np.float32))
-    np.testing.assert_allclose(runner.policy_obs()["state"][0, :, 0], [0.1, 0.2])
+        runner.act(frame, np.concatenate([[x, 0, 0.25], ROT6D, [0.04, 1.0]]).astype(np.float32))
+    np.testing.assert_allclose(policy.calls[-1]["obs"]["state"][0, :, 0], [0.1, 0.2])
     # slot order is the policy's: slot 1 is the pan, whose cloud is centred on the pan
     np.testing.assert_allclose(window["object_clouds"][0, -1, 1].mean(0)[:2], PAN.center_xy, atol=0.02)
+    # one step in: the runner's input is the frame's clouds and the state, batch 1
+    step = runner.policy_input(frame, state)
+    assert step["object_clouds"].shape == (1, 2, 64, 3) and step["state"].shape == (1, 11)
+
+
+def test_the_runner_executes_what_the_policy_queues_and_resets_it_each_episode(observer):
+    env = FakeEnv([BOWL, PAN], max_steps=5, success_radius=-1.0)
+    policy = FakePolicy()
+    runner = PolicyRunner(policy, observer)
+    policy.select_action({"object_clouds": np.zeros((1, 2, 64, 3), np.float32),  # left over from elsewhere
+                          "state": np.zeros((1, 11), np.float32)})
+    path = rollout(env, runner, seed=0, stop_on_success=False).ee_path
+    assert len(policy.calls) == 2 and runner.chunks[0].step == 0  # the runner's first step sampled afresh
+    np.testing.assert_array_equal(policy.last_chunk.trajectory[0].numpy(), runner.chunks[-1].trajectory)
+    np.testing.assert_array_equal(path[1:], policy.last_chunk.actions[0, :5, :3].numpy())  # in order, as queued
+    rollout(env, runner, seed=0, stop_on_success=False)
+    assert len(policy.calls) == 3  # the next episode's first step sampled again: reset dropped the queue
 
 
 def test_one_chunk_is_executed_for_n_action_steps_before_replanning(observer):
@@ -192,7 +214,7 @@ def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(obser
     assert scene_obstacles(frame) == ["obstacle_0"]
     runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(margin=0.02, body="sphere")),
                           obstacle_phrases=["obstacle_0"], held_object="bowl")
-    runner.push(frame, state)
+    runner.update_obstacles(frame, state)
     (cylinder,) = list(runner.obstacles)
     assert isinstance(cylinder, Cylinder) and cylinder.xy_only
     # a 6 cm square post seen at 64x64 from one side: the covering circle sits within ~1.5 cm of its axis
@@ -205,7 +227,7 @@ def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(obser
 
     fixed = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.05)),
                          obstacle_phrases=["obstacle_0"])
-    fixed.push(frame, state)
+    fixed.update_obstacles(frame, state)
     assert fixed.held_radius == 0.05
 
 
@@ -216,10 +238,10 @@ def test_a_target_that_is_not_carried_leaves_only_the_gripper_in_q_star(observer
     frame, state = observe(env, obs)
     runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(body="sphere", gripper_radius=0.02)),
                           obstacle_phrases=["obstacle_0"])
-    runner.push(frame, state)
+    runner.update_obstacles(frame, state)
     assert runner.held_object is None and runner.held_radius == 0.02
     runner.set_objects(held_object="bowl")
-    runner.push(frame, state)
+    runner.update_obstacles(frame, state)
     assert runner.held_radius > 0.09
     runner.set_objects(obstacle_phrases=["obstacle_0"])  # what is carried stays unless it is named
     assert runner.held_object == "bowl"
@@ -231,7 +253,7 @@ def test_a_phrase_naming_several_obstacles_fits_one_cylinder_each(observer):
     env = FakeEnv([BOWL, PAN, *mugs])
     obs, _ = env.reset(seed=0)
     runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(), obstacle_phrases=["mug"])
-    runner.push(*observe(env, obs))
+    runner.update_obstacles(*observe(env, obs))
     centres = sorted(float(c.center[1]) for c in runner.obstacles)
     assert len(centres) == 2  # "avoid the mugs": never merged into one cloud, never ambiguous
     np.testing.assert_allclose(centres, [-0.12, 0.12], atol=0.015)
@@ -243,7 +265,7 @@ def test_the_cost_can_be_densified_and_pushed_isotropically_in_metres(observer):
     frame, state = observe(env, obs)
     config = RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.03), metric_gradient=True, densify=4)
     runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
-    runner.push(frame, state)
+    runner.update_obstacles(frame, state)
     cost = runner.obstacle_cost
     assert isinstance(cost, MetricGradient) and isinstance(cost.cost, Densified) and cost.cost.factor == 4
     # the MetricGradient weight is the normaliser scale squared: (2 / span)^2 per position axis
@@ -318,8 +340,6 @@ def test_runner_checks_its_inputs(observer):
         PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=16))
     with pytest.raises(ValueError, match="obstacle shape"):
         ObstacleModel(shape="cone")
-    with pytest.raises(ValueError, match="first"):
-        PolicyRunner(FakePolicy(), observer).policy_obs()
     assert issubclass(ClosedLoopError, Lano3dpError)  # rollout turns it into a failed episode, not a crash
 
 
@@ -328,13 +348,11 @@ def test_image_and_scene_policies_get_their_own_inputs(observer):
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
     image_runner = PolicyRunner(FakePolicy("image"), None)
-    image_runner.push(frame, state)
-    window = image_runner.policy_obs()
-    assert window["rgb"].shape == (1, 2, 96, 96, 3) and window["rgb"].dtype == np.uint8
+    step = image_runner.policy_input(frame, state)
+    assert step["rgb"].shape == (1, 96, 96, 3) and step["rgb"].dtype == np.uint8
     scene_runner = PolicyRunner(FakePolicy("scene"), observer)
-    scene_runner.push(frame, state)
-    cloud = scene_runner.policy_obs()["scene_cloud"]
-    assert cloud.shape == (1, 2, 512, 3)
+    cloud = scene_runner.policy_input(frame, state)["scene_cloud"]
+    assert cloud.shape == (1, 512, 3)
     assert (cloud[..., 2] > 0).all()  # the table is removed
 
 
@@ -343,17 +361,15 @@ def test_a_target_hidden_after_the_first_frame_keeps_its_previous_cloud(observer
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
     runner = PolicyRunner(FakePolicy(), observer)
-    runner.push(frame, state)
-    first = runner.policy_obs()["object_clouds"][0, -1]
+    first = runner.policy_input(frame, state)["object_clouds"][0]
     hidden_pan = render_boxes(frame.camera, [BOWL])  # the pan is gone from view (occluded)
-    runner.push(hidden_pan, state)
-    second = runner.policy_obs()["object_clouds"][0, -1]
+    second = runner.policy_input(hidden_pan, state)["object_clouds"][0]
     np.testing.assert_array_equal(second[1], first[1])
     assert runner.held_clouds == 1
 
     fresh = PolicyRunner(FakePolicy(), observer)
     with pytest.raises(ObjectNotFoundError, match="'pan'"):  # never seen: nothing to hold
-        fresh.push(hidden_pan, state)
+        fresh.policy_input(hidden_pan, state)
 
 
 def test_the_collector_and_the_runtime_share_one_resize_and_one_observe():
@@ -401,7 +417,7 @@ def test_the_swept_body_is_the_hand_plus_the_held_object_while_it_is_grasped(obs
     # the EE 3 cm above the bowl's rim, fingers along world y, gripper open: the hand alone
     at_rim = np.array([BOWL.center_xy[0] + 0.05, BOWL.center_xy[1], 0.08])
     free = np.concatenate([at_rim, ROT6D, [0.08, 0.0]]).astype(np.float32)
-    runner.push(frame, free)
+    runner.update_obstacles(frame, free)
     offsets, radii = runner.swept_body(frame, free)
     assert np.allclose(offsets[:, [0, 2]], 0) and np.abs(offsets[:, 1]).max() == pytest.approx(0.04)
     assert runner.held_radius == pytest.approx(model.hand_half_span)

@@ -21,7 +21,7 @@ from lano3dp.evaluate import dataset_settings
 from lano3dp.geometry.camera import PinholeCamera
 from lano3dp.geometry.frame import RGBDFrame
 from lano3dp.geometry.rotations import matrix_to_rot6d, rot6d_to_matrix
-from lano3dp.policy import DiffusionPolicy, PolicyConfig
+from lano3dp.policy import ChunkedControl, DiffusionPolicy, PolicyConfig
 from lano3dp.runtime import PolicyRunner, interpolate_action, rollout
 from lano3dp.sim.protocol import SimulatorProtocol
 from lano3dp.train import TrainConfig, Trainer, TrainingConfigError, train
@@ -257,16 +257,17 @@ class CountingEnv:
         pass
 
 
-class RecordingPolicy:
+class RecordingPolicy(ChunkedControl):
     """A real policy whose every chunk is recorded with the env steps its observation window came from."""
 
     def __init__(self, policy: DiffusionPolicy):
-        self.policy, self.config, self.normalizer = policy, policy.config, policy.normalizer
+        self.policy, self.config, self.normalizer, self.device = policy, policy.config, policy.normalizer, policy.device
         self.calls: list[dict] = []
+        self.reset()
 
     def predict_action_chunk(self, obs, **options):
         with torch.no_grad():
             chunk = self.policy.predict_action_chunk(obs, **options)
         actions = chunk.actions[0, : self.config.n_action_steps].cpu().numpy().astype(np.float32)
-        self.calls.append({"obs_steps": obs["state"][0, :, 9].astype(int).tolist(), "actions": actions})
+        self.calls.append({"obs_steps": torch.as_tensor(obs["state"])[0, :, 9].int().tolist(), "actions": actions})
         return chunk

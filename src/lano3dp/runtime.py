@@ -1,15 +1,17 @@
-"""Closed-loop runtime: frames -> policy observation window -> (guided) action chunk -> env steps.
+"""Closed-loop runtime: frames -> the policy's observations -> (guided) action chunks -> env steps.
 
 The loop of the paper's deployment phase (Fig. 1), for any environment that meets the simulator
 protocol (`lano3dp.sim.protocol`): `reset(seed, options) -> (obs, info)` and
 `step(action (10,)) -> (obs, reward, terminated, truncated, info)`, where `obs` carries an
 `RGBDFrame` and the 11-D robot state.
 
-    PolicyRunner     keeps the last n_obs_steps observations (the policy's window), turns each frame into
-                     the policy's visual input (object clouds / scene cloud / 96x96 RGB: its observation
-                     type's `runtime_input`, `policy.observations`), turns obstacle
-                     phrases into guidance costs, samples a chunk and hands out its n_action_steps
-                     actions one by one before re-planning (receding horizon, as Diffusion Policy).
+    PolicyRunner     drives the policy through its control contract (`reset`, `select_action`): the policy
+                     keeps the last n_obs_steps observations and the queued actions, and re-plans when the
+                     queue is empty (receding horizon, as Diffusion Policy). The runner adds what only it
+                     knows: each frame becomes the policy's visual input (object clouds / scene cloud /
+                     96x96 RGB: its observation type's `runtime_input`, `policy.observations`), obstacle
+                     phrases become guidance costs, and each chunk is sampled guided, checked or guided when
+                     needed and recorded (its `plan` is the `sample` hook of `select_action`).
                      A policy trained with a time stride S (PolicyConfig.time_stride) observes and acts every
                      S env steps and each of its actions spans S env steps (`interpolate_action`).
     rollout          runs one episode with a runner and measures it (success, obstacle contacts, minimum
@@ -33,6 +35,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
+from functools import partial
 from typing import Any
 
 import numpy as np
@@ -52,6 +55,7 @@ from lano3dp.guidance.shapes import (
     describe_obstacle,  # re-exported: results and plots read it from here
 )
 from lano3dp.perception.exceptions import PerceptionError, TooFewPointsError
+from lano3dp.policy.modeling import ActionChunk
 
 # The built-in shapes (kept for code that imported it); `guidance.obstacle_shape_names()` lists every registered one.
 OBSTACLE_SHAPES = BUILTIN_OBSTACLE_SHAPES
@@ -150,7 +154,8 @@ class ChunkRecord:
 
     Attributes:
         step: env step at which the chunk was planned.
-        latency_s: wall time of perception + sampling (+ re-tries), seconds.
+        latency_s: wall time of planning the chunk: sampling (+ re-tries) and its checks, seconds (the frame's
+            perception and the obstacle fits before it are not in it).
         sample_s: wall time of sampling alone (all tries), seconds.
         tries: samples drawn (1 unless checked execution re-sampled).
         scale: rho of the executed sample (0 when unguided).
@@ -199,8 +204,13 @@ def interpolate_action(previous: np.ndarray, target: np.ndarray, steps: int) -> 
 class PolicyRunner:
     """Receding-horizon controller around a `DiffusionPolicy`.
 
+    The policy owns the observation window and the action queue (`select_action`); the runner turns frames into
+    its observations, obstacles into costs, and samples and records each chunk when the policy asks for one.
+
     Args:
-        policy: anything with `config` (PolicyConfig) and `predict_action_chunk` (DiffusionPolicy).
+        policy: a `policy.ControlPolicy`: `config` (PolicyConfig), `predict_action_chunk`, `reset` and
+            `select_action` with its `sample` hook (a DiffusionPolicy; `policy.ChunkedControl` gives the last two
+            to any chunk sampler); its `normalizer` is read for the metric push (`metric_gradient`).
         observer: an `ObjectObserver` (segmenter + FPS); needed for "objects" policies and for obstacles.
         config: sampling / guidance / execution settings.
         target_phrases: words naming the policy's object slots in this scene, in slot order (default: the
@@ -240,8 +250,6 @@ class PolicyRunner:
             raise ValueError(f"obstacles {self.obstacle_phrases} need an observer to segment them")
         self.held_object = held_object or None
         self.visual_fn = visual_fn or self._default_visual
-        self.history: deque[dict[str, np.ndarray]] = deque(maxlen=self.n_obs_steps)
-        self.queue: deque[np.ndarray] = deque()
         self.env_actions: deque[np.ndarray] = deque()  # the env steps of the policy action being executed
         self.commanded: np.ndarray | None = None  # the last action handed to the env
         self.chunks: list[ChunkRecord] = []
@@ -257,12 +265,13 @@ class PolicyRunner:
         self.initial_targets: dict[str, list[float]] = {}  # phrase -> centroid (m) in the first frame
         self.stopped_reason: str | None = None
         self.generator = torch.Generator().manual_seed(self.config.seed)
+        self.policy.reset()  # whatever the policy queued before belongs to no episode of this runner
 
     # ---- episode ---------------------------------------------------------------------------
     def reset(self, seed: int | None = None) -> None:
-        """Forget the window, the queued actions and the fitted obstacles; re-seed the sampling noise."""
-        self.history.clear()
-        self.queue.clear()
+        """Start an episode: reset the policy (its window and queued actions), forget the fitted obstacles and what
+        was perceived, re-seed the sampling noise."""
+        self.policy.reset()
         self.env_actions.clear()
         self.commanded = None
         self.chunks = []
@@ -343,41 +352,11 @@ class PolicyRunner:
                 self.partly_hidden.append(phrase)
         return np.stack(clouds)
 
-    def push(self, frame: RGBDFrame, state: np.ndarray) -> None:
-        """Add one observation (frame, state (11,)) to the window; the first one also fits the obstacles,
-        and before each chunk the swept body is re-measured."""
+    def policy_input(self, frame: RGBDFrame, state: np.ndarray) -> dict[str, np.ndarray]:
+        """One observation as `select_action` takes it: {visual key: (1, ...), "state": (1, 11)}."""
         visual = np.asarray(self.visual_fn(frame))
         state = np.asarray(state, dtype=np.float32)
-        self.history.append({"visual": visual, "state": state})
-        if not self.obstacle_phrases:
-            return
-        model, planning = self.config.obstacle, not self.queue
-        if self.obstacles is None:
-            self.obstacles = self.fit_obstacles(frame)
-            self.obstacle_cost = None
-        elif model.refit_every_chunk and planning:
-            try:
-                self.obstacles = self.fit_obstacles(frame)
-                self.obstacle_cost = None
-            except (PerceptionError, EmptyCloudError):
-                self.stale_obstacle_fits += 1  # the arm hides it now: keep the last fit
-        if self.obstacle_cost is None or (model.body == "swept" and planning):
-            self.obstacle_cost = self.guidance_cost(frame, state)
-
-    def policy_obs(self) -> dict[str, np.ndarray]:
-        """The window as the policy's obs dict: {visual key: (1, To, ...), "state": (1, To, 11)}.
-
-        Before To observations exist the oldest one is repeated (Diffusion Policy's edge padding, which is
-        also how the training windows are padded at an episode's start).
-        """
-        if not self.history:
-            raise ValueError("no observation yet: call push(frame, state) first")
-        steps = list(self.history)
-        steps = [steps[0]] * (self.n_obs_steps - len(steps)) + steps
-        return {
-            self.policy_config.visual_key: np.stack([s["visual"] for s in steps])[None],
-            "state": np.stack([s["state"] for s in steps])[None],
-        }
+        return {self.policy_config.visual_key: visual[None], "state": state[None]}
 
     # ---- obstacles -------------------------------------------------------------------------
     def measure_held_radius(self, frame: RGBDFrame) -> float:
@@ -422,6 +401,24 @@ class PolicyRunner:
             return offsets, radii
         return np.vstack([offsets, self._held_ball[0]]), np.append(radii, self._held_ball[1])
 
+    def update_obstacles(self, frame: RGBDFrame, state: np.ndarray) -> None:
+        """Before a chunk: fit the obstacles if not yet fitted (re-fit them with `refit_every_chunk`) and build
+        the cost, re-measuring the swept body as it is now."""
+        if not self.obstacle_phrases:
+            return
+        model = self.config.obstacle
+        if self.obstacles is None:
+            self.obstacles = self.fit_obstacles(frame)
+            self.obstacle_cost = None
+        elif model.refit_every_chunk:
+            try:
+                self.obstacles = self.fit_obstacles(frame)
+                self.obstacle_cost = None
+            except (PerceptionError, EmptyCloudError):
+                self.stale_obstacle_fits += 1  # the arm hides it now: keep the last fit
+        if self.obstacle_cost is None or model.body == "swept":
+            self.obstacle_cost = self.guidance_cost(frame, np.asarray(state, dtype=np.float32))
+
     def guidance_cost(self, frame: RGBDFrame, state: np.ndarray) -> PositionCost:
         """The cost guidance descends for the next chunk: the fitted obstacles against the body model."""
         body = self.swept_body(frame, state) if self.config.obstacle.body == "swept" else None
@@ -433,10 +430,12 @@ class PolicyRunner:
         return cost
 
     # ---- acting ----------------------------------------------------------------------------
-    def plan(self) -> ChunkRecord:
-        """Sample a chunk from the current window and queue its n_action_steps actions."""
+    def plan(self, frame: RGBDFrame, state: np.ndarray, obs: dict[str, torch.Tensor]) -> ActionChunk:
+        """The `sample` hook of `select_action`: bring the obstacles up to date, sample a chunk from the policy's
+        window `obs` (guided, checked or guided when needed, as configured), record it in `chunks`, and return
+        it with the n_action_steps actions to execute."""
+        self.update_obstacles(frame, state)
         started = time.perf_counter()
-        obs = self.policy_obs()
         cfg = self.config
         guidance = cfg.guidance if cfg.guided and self.obstacle_cost is not None else None
         cost = self.obstacle_cost
@@ -451,14 +450,14 @@ class PolicyRunner:
         record = ChunkRecord(step=self.step_count, latency_s=0.0, sample_s=0.0)
         if cfg.checked is not None and cost is not None:
             check = CheckConfig(**{**asdict(cfg.checked), "n_execute": self.n_action_steps})
-            state = torch.as_tensor(self.history[-1]["state"][:3])[None]
+            position = obs["state"][:, -1, :3]  # the EE now: the first executed segment starts there
             start = self.policy_config.n_obs_steps - 1
 
             def sample_fn(guide: GuidanceConfig):
                 chunk = sample(guide if guide.mode is not GuidanceMode.NONE else None)
                 return chunk.trajectory[:, start:, :3].float(), chunk
 
-            result = checked_sample(sample_fn, cost, guidance, check, start_position=state)
+            result = checked_sample(sample_fn, cost, guidance, check, start_position=position)
             chunk = result.payload
             record.tries = result.tries
             record.scale = result.guidance.scale if result.guidance.mode is not GuidanceMode.NONE else 0.0
@@ -484,7 +483,7 @@ class PolicyRunner:
                     executed = chunk.actions[:, : self.n_action_steps, :3].float()
                     record.predicted_clearance = float(cost.clearance(executed).min())
         record.sample_s = time.perf_counter() - sample_started
-        actions = chunk.actions[0, : self.n_action_steps].detach().cpu().numpy().astype(np.float32)
+        chunk = ActionChunk(chunk.actions[:, : self.n_action_steps], chunk.trajectory)
         record.trajectory = chunk.trajectory[0].detach().cpu().numpy().astype(np.float32)
         record.latency_s = time.perf_counter() - started
         self.chunks.append(record)
@@ -493,21 +492,19 @@ class PolicyRunner:
             raise ClosedLoopError(f"no collision-free chunk at step {self.step_count} after {record.tries} tries "
                                   f"(up to rho={record.scale:g}); predicted clearance "
                                   f"{record.predicted_clearance:.3f} m")
-        self.queue.extend(actions)
-        return record
+        return chunk
 
     def act(self, frame: RGBDFrame, state: np.ndarray) -> np.ndarray:
-        """Observe, re-plan when the queue is empty, and return the next (10,) absolute EE action.
+        """Observe, let the policy re-plan (through `plan`) when its queue is empty, and return the next (10,)
+        absolute EE action.
 
         Call it every env step. With a time stride S it observes only every S-th env step, so the window holds
         frames S env steps apart as the training windows held recorded steps, and each policy action becomes S
         env actions interpolated from the last commanded one (`interpolate_action`).
         """
         if not self.env_actions:
-            self.push(frame, state)
-            if not self.queue:
-                self.plan()
-            target = self.queue.popleft()
+            action = self.policy.select_action(self.policy_input(frame, state), sample=partial(self.plan, frame, state))
+            target = action[0].detach().cpu().numpy().astype(np.float32)
             if self.time_stride == 1:
                 self.env_actions.append(target)
             else:
@@ -533,7 +530,7 @@ class EpisodeResult:
         min_clearance: smallest true distance (m) between robot/held object and any obstacle, from the
             simulator (None when the env reports none, e.g. no obstacle).
         path_length: EE path length (m), from the robot state.
-        chunk_latency_s: perception + sampling time of every chunk, seconds.
+        chunk_latency_s: planning time of every chunk (`ChunkRecord.latency_s`), seconds.
         chunk_tries: samples drawn per chunk (checked execution).
         chunk_predicted_clearance: per chunk, the runner's own clearance estimate of the executed waypoints.
         ee_path: (steps + 1, 3) EE positions, metres (kept for plots; dropped from JSON by default).

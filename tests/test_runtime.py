@@ -195,6 +195,18 @@ def test_one_chunk_is_executed_for_n_action_steps_before_replanning(observer):
     assert len(rollout(env, runner, seed=3, stop_on_success=False).chunk_latency_s) == 5
 
 
+def test_more_actions_per_chunk_than_the_policy_was_trained_with_are_taken_from_its_horizon(observer):
+    """RuntimeConfig.n_action_steps may exceed the policy's (up to what the horizon holds): the extra actions
+    are the horizon's next waypoints, not silently dropped (the runner re-planned every policy Ta steps)."""
+    env = FakeEnv([BOWL, PAN], max_steps=16, success_radius=-1.0)
+    policy = FakePolicy(n_action_steps=4)
+    runner = PolicyRunner(policy, observer, RuntimeConfig(n_action_steps=8))
+    result = rollout(env, runner, seed=0, stop_on_success=False)
+    assert [c.step for c in runner.chunks] == [0, 8]
+    np.testing.assert_array_equal(result.ee_path[1:9], runner.chunks[0].trajectory[1:9, :3])  # To - 1 = 1 is now
+    assert policy.last_chunk.actions.shape == (1, 8, 10)
+
+
 def test_unobstructed_episode_succeeds_and_measures_the_path(observer):
     env = FakeEnv([BOWL, PAN])
     result = rollout(env, PolicyRunner(FakePolicy(), observer), seed=0)

@@ -437,6 +437,10 @@ class PolicyRunner:
         self.update_obstacles(frame, state)
         started = time.perf_counter()
         cfg = self.config
+        start = self.policy_config.n_obs_steps - 1  # "now" in the horizon
+        # the actions to execute, from the horizon rather than chunk.actions, which holds only the policy's own
+        # n_action_steps: the runner's may be more
+        execute = slice(start, start + self.n_action_steps)
         guidance = cfg.guidance if cfg.guided and self.obstacle_cost is not None else None
         cost = self.obstacle_cost
 
@@ -451,7 +455,6 @@ class PolicyRunner:
         if cfg.checked is not None and cost is not None:
             check = CheckConfig(**{**asdict(cfg.checked), "n_execute": self.n_action_steps})
             position = obs["state"][:, -1, :3]  # the EE now: the first executed segment starts there
-            start = self.policy_config.n_obs_steps - 1
 
             def sample_fn(guide: GuidanceConfig):
                 chunk = sample(guide if guide.mode is not GuidanceMode.NONE else None)
@@ -469,7 +472,6 @@ class PolicyRunner:
                 # the policy's own chunk, kept when its whole horizon already clears every obstacle by the
                 # margin: guidance then never bends a grasp that was not heading for the obstacle
                 plain = sample(None)
-                start = self.policy_config.n_obs_steps - 1
                 with torch.no_grad():
                     gap = float(cost.clearance(plain.trajectory[:, start:, :3].float()).min())
                 if gap >= self.config.obstacle.margin:
@@ -480,10 +482,10 @@ class PolicyRunner:
             record.scale = guidance.scale if guidance is not None else 0.0
             if cost is not None:
                 with torch.no_grad():
-                    executed = chunk.actions[:, : self.n_action_steps, :3].float()
+                    executed = chunk.trajectory[:, execute, :3].float()
                     record.predicted_clearance = float(cost.clearance(executed).min())
         record.sample_s = time.perf_counter() - sample_started
-        chunk = ActionChunk(chunk.actions[:, : self.n_action_steps], chunk.trajectory)
+        chunk = ActionChunk(chunk.trajectory[:, execute], chunk.trajectory)
         record.trajectory = chunk.trajectory[0].detach().cpu().numpy().astype(np.float32)
         record.latency_s = time.perf_counter() - started
         self.chunks.append(record)

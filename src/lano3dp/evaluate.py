@@ -279,13 +279,17 @@ def runtime_config(config: EvalConfig, seed: int):
 
 # ---- one process: policy + env + episodes ---------------------------------------------------------
 class EpisodeRunner:
-    """Loads the policy and builds the env once, then runs episodes by seed (used by every worker)."""
+    """Loads the policy and builds the env once, then runs episodes by seed (used by every worker).
 
-    def __init__(self, config: EvalConfig):
+    `runner_class` is the controller each episode gets (a `runtime.PolicyRunner` subclass to change how it
+    perceives or guides; None: PolicyRunner itself)."""
+
+    def __init__(self, config: EvalConfig, runner_class=None):
         from lano3dp.perception import ObjectObserver
         from lano3dp.policy import DiffusionPolicy
 
         self.config = config
+        self.runner_class = runner_class
         self.policy = DiffusionPolicy.from_pretrained(config.checkpoint)
         settings = dataset_settings(config.checkpoint)
         self.settings = settings
@@ -306,7 +310,7 @@ class EpisodeRunner:
         from lano3dp.runtime import PolicyRunner, rollout, scene_obstacles
 
         config = self.config
-        runner = PolicyRunner(self.policy, self.observer, runtime_config(config, seed))
+        runner = (self.runner_class or PolicyRunner)(self.policy, self.observer, runtime_config(config, seed))
         slots = tuple(self.policy.config.object_names)
         carried = carried_slot_word(self.task)
 

@@ -2,7 +2,7 @@
 
 Per task and recipe (`--recipes`, from RECIPES below) and training seed:
   1. collect `--demos` scripted-expert demonstrations of clean scenes, with the recipe's points per object
-     (each with 1 s of the expert's follow-through past its first success frame, `data.collect`);
+     (each with 1 s of the expert's follow-through past its first success frame, `lano3dp.collect`);
   2. train for a budget of `--minutes` CPU-minutes (this process's CPU time, so other jobs on the machine
      change the wall time, not the number of steps), checkpointing `--checkpoints` times along the way;
   3. evaluate every checkpoint on clean episodes under the simulator's motion limits: `--episodes` at the
@@ -49,7 +49,7 @@ RECIPES = {
     # ... on demonstrations that end at the first success frame, as collected before follow-through (6a5aa3c)
     "compact_cut": {"points": 64, "policy": {"action_frame": "absolute"}, "collect": {"follow_through_s": 0.0}},
     # the compact recipe on demonstrations with injected noise (DART): states off the expert's path, labelled
-    # with the way back (`data.collect`, issue 14: policies lost their way after an obstacle detour)
+    # with the way back (`lano3dp.collect`, issue 14: policies lost their way after an obstacle detour)
     "dart": {"points": 64, "policy": {"action_frame": "absolute"}, "collect": {"dart_noise": 0.03}},
     # the compact policy predicting positions as offsets from the hand (PolicyConfig.action_frame): an
     # absolute target must also re-derive where the hand is, which looked like what stalled the fine stages

@@ -134,7 +134,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 class Overrides(NamedTuple):
     """Settings the command line does not expose, for reduced runs (tests): each a dict of keyword arguments.
 
-    collect: to `data.collect.collect` (e.g. image_size); policy: to `train.policy_config_for_dataset` (UNet and
+    collect: to `collect.collect` (e.g. image_size); policy: to `train.policy_config_for_dataset` (UNet and
     encoder widths); train: to `pipeline.train_stage` (e.g. val_ratio); eval: EvalConfig fields (e.g. max_steps).
     The report reads the evaluations back with the same EvalConfigs, so give it the same overrides.
     """

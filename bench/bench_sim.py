@@ -85,7 +85,7 @@ def bench_task(task: str, episodes: int, image_size: int) -> dict:
 
 
 def bench_collect(episodes: int) -> dict:
-    from lano3dp.data.collect import collect
+    from lano3dp.collect import collect
 
     with tempfile.TemporaryDirectory() as folder:
         t0, c0 = time.perf_counter(), time.process_time()

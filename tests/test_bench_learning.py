@@ -25,7 +25,7 @@ def fake_eval(path: Path, successes: int, episodes: int) -> None:
 
 
 def test_the_report_reads_curves_and_packaging_ships_the_final_checkpoint(tmp_path, monkeypatch):
-    from lano3dp.data.collect import collect
+    from lano3dp.collect import collect
     from lano3dp.pipeline import train_stage
     from lano3dp.train import policy_config_for_dataset
 

@@ -5,7 +5,7 @@ from typer.testing import CliRunner
 
 from lano3dp.cli import app
 from lano3dp.data import EpisodeStore
-from lano3dp.data.collect import collect
+from lano3dp.collect import collect
 
 
 def test_collect_writes_the_documented_keys_and_resumes(tmp_path):
@@ -42,7 +42,7 @@ def test_collect_writes_the_documented_keys_and_resumes(tmp_path):
 def test_failed_expert_episodes_are_never_stored(tmp_path):
     import pytest
 
-    from lano3dp.data.collect import MAX_TRIES, CollectionError
+    from lano3dp.collect import MAX_TRIES, CollectionError
 
     out = tmp_path / "short.zarr"
     # 5 steps are far too few for the expert: every seed fails, nothing is written.
@@ -64,7 +64,7 @@ def test_similar_scenes_record_the_colour_named_target(tmp_path):
 def test_noise_injection_moves_the_robot_off_the_expert_path_but_records_the_expert(tmp_path):
     """DART: the states leave the expert's path by centimetres, every label is the expert's own action, and
     the hand is left alone at the grasp and the release."""
-    from lano3dp.data.collect import DartNoise
+    from lano3dp.collect import DartNoise
     from lano3dp.sim import TabletopEnv
 
     out = tmp_path / "dart.zarr"
@@ -98,7 +98,7 @@ def test_episodes_go_on_past_the_first_success_while_it_holds(tmp_path):
     would end at 3 cm and teach a policy to stop there; with follow-through it shows the rest of the pull."""
     import pytest
 
-    from lano3dp.data.collect import CollectionError
+    from lano3dp.collect import CollectionError
     from lano3dp.sim import TabletopEnv
 
     cut = collect("open_wine_bottle", 1, tmp_path / "cut.zarr", image_size=32, n_points=16, progress=False,

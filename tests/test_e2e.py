@@ -25,7 +25,7 @@ EPISODE_FIELDS = ("seed", "success", "steps", "collided", "n_collision_steps", "
 
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
-    from lano3dp.data.collect import collect
+    from lano3dp.collect import collect
     from lano3dp.train import TrainConfig, policy_config_for_dataset, train
 
     root = tmp_path_factory.mktemp("e2e")

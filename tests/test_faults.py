@@ -278,7 +278,7 @@ def _hold_lock(target: Path) -> subprocess.Popen:
 
 
 def test_a_second_writer_is_refused_with_the_holders_pid(reach_data, tiny_checkpoint, tmp_path):
-    from lano3dp.data.collect import collect
+    from lano3dp.collect import collect
 
     dataset, run, results = tmp_path / "d.zarr", tmp_path / "run", tmp_path / "r.json"
     holders = [_hold_lock(target) for target in (dataset, run, results)]

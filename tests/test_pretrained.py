@@ -22,7 +22,7 @@ pytestmark = pytest.mark.slow
 @pytest.fixture(scope="module")
 def moved_checkpoint(tmp_path_factory):
     """A tiny bowl_pour policy whose training dataset was deleted after training."""
-    from lano3dp.data.collect import collect
+    from lano3dp.collect import collect
     from lano3dp.train import TrainConfig, policy_config_for_dataset, train
 
     root = tmp_path_factory.mktemp("pretrained")

@@ -385,7 +385,7 @@ def test_a_target_hidden_after_the_first_frame_keeps_its_previous_cloud(observer
 
 
 def test_the_collector_and_the_runtime_share_one_resize_and_one_observe():
-    from lano3dp.data import collect
+    from lano3dp import collect
     from lano3dp.policy.observations import image
     from lano3dp.runtime import observe
 

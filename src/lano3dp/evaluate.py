@@ -7,7 +7,7 @@
 
 Each episode is a fresh scene from its seed (seed, seed + 1, ...; the default first
 seed 1000000 keeps evaluation scenes apart from demonstration seeds: 0, 1, ... and their retries
-at multiples of 100003, see data.collect). Episodes run in
+at multiples of 100003, see lano3dp.collect). Episodes run in
 `workers` spawned processes with one torch thread each (two OpenMP threads per process stall on a
 shared 2-core machine; notes/cpu-cost.md sec. 1), and results come back in seed order, so the JSON does
 not depend on the number of workers. Latencies measured with several workers include their contention.

@@ -40,9 +40,9 @@ def dataset_episodes(path: str | Path) -> int:
 def collect_stage(task: str, episodes: int, out: str | Path, *, log: Log = _quiet, **options) -> Path:
     """Scripted-expert demonstrations of `task` into `out` until it holds `episodes` episodes.
 
-    `options` go to `lano3dp.data.collect.collect` (e.g. variation, seed, image_size).
+    `options` go to `lano3dp.collect.collect` (e.g. variation, seed, image_size).
     """
-    from lano3dp.data.collect import collect
+    from lano3dp.collect import collect
 
     out = Path(out)
     have = dataset_episodes(out)

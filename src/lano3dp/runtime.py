@@ -317,7 +317,7 @@ class PolicyRunner:
 
         A target that is momentarily hidden (too few points, e.g. the pan under the tilted bowl, or behind an
         obstacle) keeps its previous cloud, as a video tracker would and as the demonstrations were recorded
-        (`data.collect`). In the first frame a target with only a few points in view is taken from those;
+        (`lano3dp.collect`). In the first frame a target with only a few points in view is taken from those;
         one not in view at all is an error the caller sees.
         """
         try:

@@ -69,7 +69,7 @@ def collect_command(
 ) -> None:
     """Record expert demonstrations (only successful episodes are kept) into a zarr dataset."""
     from lano3dp.cli import _options
-    from lano3dp.data.collect import collect, collect_from_env
+    from lano3dp.collect import collect, collect_from_env
 
     _options.output_path(out, folder=True)
     if env is None:

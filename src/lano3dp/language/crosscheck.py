@@ -16,7 +16,7 @@ from lano3dp.language.exceptions import LanguageError
 from lano3dp.language.offline import POSITION_WORDS, OfflineDecomposer, lemmas, tokenize
 from lano3dp.language.plan import ObjectRef, TaskPlan
 from lano3dp.language.registry import SceneObjects, scene_vocabulary
-from lano3dp.perception.sim_oracle import canonical_attribute, resolve_phrase, singular
+from lano3dp.vocabulary import canonical_attribute, resolve_phrase, singular
 
 
 class CrossCheck(NamedTuple):

@@ -42,7 +42,7 @@ from lano3dp.language.registry import (
     default_registry,
     scene_vocabulary,
 )
-from lano3dp.perception.sim_oracle import COLOURS, SIZE_WORDS, canonical_attribute, resolve_phrase, singular
+from lano3dp.vocabulary import COLOURS, SIZE_WORDS, canonical_attribute, resolve_phrase, singular
 
 _WORD = re.compile(r"[a-z]+(?:'[a-z]+)?|[.,;:!?]")
 _SENTENCE_END = frozenset(".;:!?")

@@ -16,7 +16,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 
 from lano3dp.language.exceptions import SlotMismatchError, UnknownObjectError, UnknownSkillError
 from lano3dp.language.plan import TaskPlan
-from lano3dp.perception.sim_oracle import COLOURS, SIZE_WORDS, SceneObject, resolve_phrase, singular
+from lano3dp.vocabulary import COLOURS, SIZE_WORDS, SceneObject, resolve_phrase, singular
 
 
 def _normalise_words(words: Iterable[str]) -> tuple[str, ...]:

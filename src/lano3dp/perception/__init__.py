@@ -15,7 +15,8 @@ from lano3dp.perception.exceptions import (
 from lano3dp.perception.factory import SegmenterConfig, build_segmenter
 from lano3dp.perception.observer import ObjectClouds, ObjectObserver, scene_cloud
 from lano3dp.perception.perturb import MaskPerturbation, PerturbedSegmenter
-from lano3dp.perception.sim_oracle import SimOracleSegmenter, resolve_phrase
+from lano3dp.perception.sim_oracle import SimOracleSegmenter
+from lano3dp.vocabulary import resolve_phrase
 
 __all__ = [
     "AmbiguousObjectError",

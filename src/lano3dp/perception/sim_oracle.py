@@ -9,9 +9,7 @@ object is reported as not found rather than silently replaced by a look-alike.
 
 from __future__ import annotations
 
-import re
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from collections.abc import Sequence
 from typing import Literal
 
 import numpy as np
@@ -20,105 +18,17 @@ from lano3dp.geometry.frame import RGBDFrame
 from lano3dp.perception.base import MaskResult
 from lano3dp.perception.exceptions import AmbiguousObjectError
 
-COLOURS = frozenset(
-    "red green blue yellow orange purple pink brown black white grey gray cyan magenta "
-    "beige silver gold golden teal violet navy".split()
+# The phrase vocabulary lives in lano3dp.vocabulary (language resolves phrases the same way); these names are
+# re-exported because callers and tests import them from here.
+from lano3dp.vocabulary import (  # noqa: F401
+    COLOURS,
+    SIZE_WORDS,
+    SceneObject,
+    canonical_attribute,
+    resolve_phrase,
+    singular,
+    tokens,
 )
-# Size words to one canonical word each, so "big bowl" finds an object whose size is "large".
-SIZE_WORDS = {
-    "small": "small", "little": "small", "tiny": "small", "mini": "small",
-    "large": "large", "big": "large", "huge": "large", "giant": "large",
-    "medium": "medium", "mid": "medium", "middle": "medium",
-    "tall": "tall", "short": "short",
-}  # fmt: skip
-_COLOUR_ALIASES = {"gray": "grey", "golden": "gold"}
-_STOPWORDS = frozenset("the a an this that these those some my our your its of one".split())
-_TOKEN = re.compile(r"[a-z0-9]+")
-
-
-_PLURAL_ONLY = frozenset("scissors tongs pliers tweezers shears binoculars headphones".split())
-
-
-def singular(word: str) -> str:
-    """Crude English singular for object nouns ("bowls" -> "bowl", "boxes" -> "box", "glasses" -> "glass")."""
-    if word in _PLURAL_ONLY:
-        return word
-    if len(word) > 4 and word.endswith(("sses", "xes", "ches", "shes")):
-        return word[:-2]
-    if len(word) > 3 and word.endswith("s") and not word.endswith(("ss", "us", "is")):
-        return word[:-1]
-    return word
-
-
-def canonical_attribute(word: str) -> str:
-    word = word.lower()
-    return SIZE_WORDS.get(word, _COLOUR_ALIASES.get(word, word))
-
-
-def tokens(text: str) -> list[str]:
-    """Lower-case word tokens; underscores and hyphens split words; articles are dropped."""
-    return [t for t in _TOKEN.findall(text.lower().replace("_", " ")) if t not in _STOPWORDS]
-
-
-@dataclass(frozen=True)
-class SceneObject:
-    """What the oracle knows of one object: its name, kind noun (as tokens) and attribute words."""
-
-    name: str
-    kind: tuple[str, ...]
-    attributes: frozenset[str] = field(default_factory=frozenset)
-
-    @classmethod
-    def from_frame_entry(cls, name: str, attributes: Mapping[str, str] | None) -> SceneObject:
-        attributes = dict(attributes or {})
-        name_tokens = [t for t in tokens(name) if not t.isdigit()]
-        kind_text = attributes.get("kind") or (name_tokens[-1] if name_tokens else name)
-        kind = tuple(singular(t) for t in tokens(str(kind_text)))
-        # "role" (target / distractor / obstacle) is bookkeeping, not something a person says.
-        words = {canonical_attribute(str(v)) for k, v in attributes.items() if k not in ("kind", "role") and v}
-        # Names like "red_bowl" carry their attributes when the simulator gives none.
-        words |= {canonical_attribute(t) for t in name_tokens if t in COLOURS or t in SIZE_WORDS}
-        return cls(name, kind, frozenset(words))
-
-
-def _contains(sequence: Sequence[str], sub: Sequence[str]) -> int:
-    """Index of the first occurrence of `sub` in `sequence`, or -1."""
-    n = len(sub)
-    for i in range(len(sequence) - n + 1):
-        if tuple(sequence[i : i + n]) == tuple(sub):
-            return i
-    return -1
-
-
-def resolve_phrase(phrase: str, objects: Sequence[SceneObject]) -> list[str]:
-    """Names of the objects a phrase can mean (empty if none, several if ambiguous).
-
-    An exact object name wins outright. Otherwise an object matches when its kind noun
-    appears in the phrase (the longest matching kind wins, so "watering can" beats "can")
-    and every colour or size word left in the phrase is one of the object's attributes.
-    Other words ("ceramic", "over there") are ignored.
-    """
-    phrase_tokens = tokens(phrase)
-    joined = " ".join(phrase_tokens)
-    for obj in objects:
-        if joined and joined == " ".join(tokens(obj.name)):
-            return [obj.name]
-    words = [singular(t) for t in phrase_tokens]
-    scene_attributes = set().union(*(o.attributes for o in objects)) if objects else set()
-    best_len, matches = 0, []
-    for obj in objects:
-        start = _contains(words, obj.kind) if obj.kind else -1
-        if start < 0:
-            continue
-        rest = [canonical_attribute(w) for i, w in enumerate(phrase_tokens) if not start <= i < start + len(obj.kind)]
-        descriptive = [w for w in rest if w in COLOURS or w in SIZE_WORDS.values() or w in scene_attributes]
-        if any(w not in obj.attributes for w in descriptive):
-            continue
-        if len(obj.kind) > best_len:
-            best_len, matches = len(obj.kind), [obj.name]
-        elif len(obj.kind) == best_len:
-            matches.append(obj.name)
-    return matches
 
 
 class SimOracleSegmenter:

@@ -1,20 +1,28 @@
 """Task registry. Each task module defines a `Task` subclass (see `base.py`) and registers it
 with the `@register_task` decorator; importing the module below adds it to `TASKS`.
 
+A task also declares how language asks for it (description, verbs, slot synonyms, the carried slot;
+see `base.py`), and the skill registry is derived from `TASKS` (`skill_registry`), so the task module
+is the one place a task's words are written.
+
 To add a task: write `tasks/<name>.py` with `@register_task class MyTask(Task): ...` and add
 one import line at the bottom of this file.
 """
 
 from __future__ import annotations
 
+from lano3dp.language.registry import SkillRegistry
 from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
 
 TASKS: dict[str, type[Task]] = {}
 
 
 def register_task(cls: type[Task]) -> type[Task]:
+    """Add a task (a class decorator). Its skill declaration is checked here, so a task whose words do
+    not fit its slots fails when its module is imported, not when an instruction is first planned."""
     if cls.name in TASKS and TASKS[cls.name] is not cls:
         raise ValueError(f"task name {cls.name!r} is registered twice")
+    cls.skill_spec()
     TASKS[cls.name] = cls
     return cls
 
@@ -29,7 +37,15 @@ def task_names() -> list[str]:
     return sorted(TASKS)
 
 
-__all__ = ["TASKS", "Layout", "Placement", "SimState", "Task", "make_task", "register_task", "task_names"]
+def skill_registry() -> SkillRegistry:
+    """The skills of the registered tasks, one per task, in `task_names()` order; built on each call, so a
+    task registered later is in it."""
+    return SkillRegistry(TASKS[name].skill_spec() for name in task_names())
+
+
+
+__all__ = ["TASKS", "Layout", "Placement", "SimState", "Task", "make_task", "register_task", "skill_registry",
+           "task_names"]
 
 # Task modules register themselves on import (one line per task).
 from lano3dp.sim.tasks import (  # noqa: E402,F401

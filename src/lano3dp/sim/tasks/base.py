@@ -3,12 +3,20 @@
 A task is a class with
 
     name            registry key, e.g. "bowl_pour"
-    skill           the skill word the language layer picks, e.g. "pour"
+    skill           the name of its skill in the language layer's skill registry: the task's name
     object_slots    ordered slot words the policy is trained on, e.g. ("bowl", "pan"); the
                     dataset's `object_clouds` are in this order
     instruction     a template over the slots, e.g. "pour the contents of the {bowl} into the {pan}"
     max_steps       episode limit at 10 Hz control
     similar_slots   slots whose kind gets look-alike instances under the "similar" variation
+
+and says how language asks for it (`skill_spec()` turns these into its skill registry entry):
+
+    description     one sentence, shown to the LLM, e.g. "grasp the bowl and pour its contents into the pan"
+    verbs           verb lemmas and phrasal verbs that ask for it, e.g. ("pour", "empty", "tip into")
+    synonyms        slot word -> other nouns for that object, e.g. {"pan": ("skillet", "frying pan")}
+    carried         the slot whose object the gripper carries (obstacles keep clear of it too), or None
+    accepts_any     slots any graspable object fills ("put an item in the drawer")
 
 and implements
 
@@ -41,12 +49,14 @@ plan from the layout and use `sim` only for refinements. The registry is in
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import mujoco
 import numpy as np
 
+from lano3dp.language.registry import SkillSpec, Slot
 from lano3dp.sim.experts import MotionPlan
 from lano3dp.sim.objects import ObjectInfo, object_of_body
 from lano3dp.sim.robot import GripperHandle
@@ -182,6 +192,29 @@ class Task(ABC):
     max_steps: ClassVar[int] = 200
     similar_slots: ClassVar[tuple[str, ...]] = ()
     stages: ClassVar[tuple[str, ...]] = ("success",)
+    # How language asks for the task's skill; see the module docstring.
+    description: ClassVar[str]
+    verbs: ClassVar[tuple[str, ...]]
+    synonyms: ClassVar[Mapping[str, tuple[str, ...]]] = {}
+    carried: ClassVar[str | None] = None
+    accepts_any: ClassVar[tuple[str, ...]] = ()
+
+    @classmethod
+    def skill_spec(cls) -> SkillSpec:
+        """This task's entry in the skill registry: its words, its slots in `object_slots` order.
+
+        Raises:
+            ValueError: the skill is not named after the task, or its words name a slot the task lacks.
+        """
+        if cls.skill != cls.name:  # evaluate and collect look a task's skill up by the task's name
+            raise ValueError(f"task {cls.name!r}: its skill must be named after it, got skill={cls.skill!r}")
+        named = {*cls.synonyms, *cls.accepts_any, *([cls.carried] if cls.carried is not None else [])}
+        if not named <= set(cls.object_slots):
+            raise ValueError(f"task {cls.name!r}: the skill's words name {sorted(named - set(cls.object_slots))}, "
+                             f"which are not among its object_slots {cls.object_slots}")
+        slots = tuple(Slot(word=word, synonyms=cls.synonyms.get(word, ()), accepts_any=word in cls.accepts_any,
+                           carried=word == cls.carried) for word in cls.object_slots)
+        return SkillSpec(name=cls.name, description=cls.description, verbs=cls.verbs, slots=slots)
 
     @abstractmethod
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout: ...

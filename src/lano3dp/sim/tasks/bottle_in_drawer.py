@@ -51,6 +51,11 @@ CARRY_CLEARANCE = 0.04  # bottle bottom above the cabinet top while carrying
 # Fingers pre-closed to a 4.4 cm gap around the 2.2 cm neck: closing from fully open, they hit the
 # thin neck fast enough to pass through it at a 4 ms physics step.
 PREGRASP_GRIP = 0.5
+# Verbs that ask to put something into a drawer (put_item_in_drawer's too).
+INTO_DRAWER_VERBS = (
+    "put", "place", "store", "stow", "insert", "drop", "move", "tuck", "set", "stash", "pack", "slip", "slide",
+    "put away", "put in", "drop in", "tuck away", "stow away",
+)
 
 
 def drawer_slot_centre(parts, origin: np.ndarray, rotation: np.ndarray, opening: float) -> np.ndarray:
@@ -84,6 +89,10 @@ class BottleInDrawer(Task):
     max_steps = 150
     similar_slots = ("bottle",)
     stages = ("reached_bottle", "grasped", "lifted", "carried_to_drawer", "placed")
+    description = "put the bottle into the open drawer"
+    verbs = INTO_DRAWER_VERBS
+    synonyms = {"bottle": ("flask",)}
+    carried = "bottle"
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)

@@ -61,6 +61,13 @@ class BottleUpright(Task):
     max_steps = 150
     similar_slots = ("bottle",)
     stages = ("reached_bottle", "grasped", "lifted", "upright", "standing")
+    description = "stand a bottle that lies on its side upright"
+    verbs = (
+        "stand", "upright", "right", "erect", "raise", "straighten", "stand up", "set upright", "put upright",
+        "turn upright", "flip upright", "prop up", "tip up",
+    )
+    synonyms = {"bottle": ("flask",)}
+    carried = "bottle"
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)

@@ -61,6 +61,13 @@ class BowlPour(Task):
     max_steps = 220
     similar_slots = ("bowl",)
     stages = ("reached_bowl", "grasped", "lifted", "over_pan", "tilted", "poured")
+    description = "grasp the bowl and pour its contents into the pan"
+    verbs = (
+        "pour", "empty", "dump", "tip", "decant", "tilt", "fill", "transfer", "spill", "drain", "tip into", "tip out",
+        "pour out", "empty out", "tip over",
+    )
+    synonyms = {"bowl": ("dish", "basin"), "pan": ("frying pan", "skillet", "pot", "saucepan", "wok")}
+    carried = "bowl"
     n_items = 3
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:

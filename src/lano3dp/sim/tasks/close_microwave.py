@@ -78,6 +78,9 @@ class CloseMicrowave(Task):
     instruction = "close the {microwave}"
     max_steps = 120
     stages = ("reached_door", "pushed", "half_closed", "closed")
+    description = "push the microwave door closed"
+    verbs = ("close", "shut", "slam", "push shut", "push closed", "swing shut", "swing closed", "push to")
+    synonyms = {"microwave": ("microwave oven", "oven")}
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)

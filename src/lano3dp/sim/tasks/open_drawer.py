@@ -143,6 +143,11 @@ class OpenDrawer(Task):
     instruction = "open the {drawer}"
     max_steps = 100
     stages = ("reached_handle", "grasped_handle", "pulled", "opened")
+    description = "pull the drawer open"
+    verbs = (
+        "open", "pull", "slide", "yank", "tug", "pull out", "pull open", "slide out", "slide open", "yank open",
+        "draw out",
+    )
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         layout = Layout(seed=0, objects=sample_drawer(rng, variation, opening=(0.0, 0.15)))

@@ -46,6 +46,12 @@ class OpenWineBottle(Task):
     instruction = "open the {bottle}"
     max_steps = 90
     stages = ("reached_cap", "grasped_cap", "pulled", "opened")
+    description = "take the cork or cap off the wine bottle"
+    verbs = (
+        "open", "uncork", "uncap", "unscrew", "pop", "decork", "remove", "pop open", "twist off", "twist open",
+        "pull out", "take off", "pull off",
+    )
+    synonyms = {"bottle": ("wine bottle", "wine")}
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)

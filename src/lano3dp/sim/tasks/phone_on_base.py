@@ -55,6 +55,16 @@ class PhoneOnBase(Task):
     max_steps = 130
     similar_slots = ("phone",)
     stages = ("reached_phone", "grasped", "lifted", "carried_to_base", "placed")
+    description = "put the phone onto its charging base"
+    verbs = (
+        "put", "place", "dock", "return", "charge", "set", "rest", "hang", "replace", "hang up", "put back", "set back",
+        "plug in",
+    )
+    synonyms = {
+        "phone": ("cellphone", "cell phone", "smartphone", "mobile", "mobile phone", "handset", "telephone"),
+        "base": ("dock", "cradle", "charger", "charging base", "charging dock", "station"),
+    }
+    carried = "phone"
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)

@@ -34,7 +34,7 @@ from lano3dp.sim.objects.articulated import BLOCK_HALF, add_block
 from lano3dp.sim.robot import HOME_POSITION, rot_z, top_down
 from lano3dp.sim.tasks import register_task
 from lano3dp.sim.tasks.base import LIFT_HEIGHT, REACH_TOLERANCE, Layout, Placement, SimState, Task
-from lano3dp.sim.tasks.bottle_in_drawer import CARRY_CLEARANCE, drawer_slot_centre, in_drawer
+from lano3dp.sim.tasks.bottle_in_drawer import CARRY_CLEARANCE, INTO_DRAWER_VERBS, drawer_slot_centre, in_drawer
 from lano3dp.sim.tasks.close_microwave import yaw_along
 from lano3dp.sim.tasks.open_drawer import build_drawer, close_gently, drawer_frame, sample_beside, sample_drawer
 from lano3dp.sim.variations import Variation
@@ -52,6 +52,11 @@ class PutItemInDrawer(Task):
     max_steps = 130
     similar_slots = ("block",)
     stages = ("reached_block", "grasped", "lifted", "carried_to_drawer", "placed")
+    description = "put a small item (a block by default) into the open drawer"
+    verbs = INTO_DRAWER_VERBS
+    synonyms = {"block": ("item", "object", "toy")}
+    carried = "block"
+    accepts_any = ("block",)
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         scale = self.instance_scale(rng, variation)

@@ -72,6 +72,10 @@ class SweepToDustpan(Task):
     max_steps = 150
     similar_slots = ("broom",)
     stages = ("reached_broom", "grasped", "lifted", "swept", "in_dustpan")
+    description = "sweep the dirt into the dustpan with the broom"
+    verbs = ("sweep", "brush", "sweep up", "brush up")
+    synonyms = {"broom": ("brush",), "dustpan": ("dust pan",)}
+    carried = "broom"
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         instance = variation.has("instance")

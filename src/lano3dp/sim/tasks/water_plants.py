@@ -74,6 +74,10 @@ class WaterPlants(Task):
     max_steps = 150
     similar_slots = ("watering can",)
     stages = ("reached_can", "grasped", "lifted", "over_plant", "tilted", "watered")
+    description = "pour water on the plant with the watering can"
+    verbs = ("water", "irrigate", "sprinkle", "give water", "pour water")
+    synonyms = {"watering can": ("sprinkler", "watering jug"), "plant": ("flower", "houseplant")}
+    carried = "watering can"
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:
         instance = variation.has("instance")

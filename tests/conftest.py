@@ -2,6 +2,9 @@
 
 Two cores shared by a busy machine stall badly with two OpenMP threads, so every test
 runs torch single-threaded.
+
+The language tests plan with the built-in skills, which are the simulator's tasks: importing
+`lano3dp.sim.tasks` installs them as `lano3dp.language.default_registry()` (language cannot import sim).
 """
 
 import os
@@ -11,5 +14,7 @@ os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import torch  # noqa: E402
+
+import lano3dp.sim.tasks  # noqa: E402,F401  (installs the default skills; see above)
 
 torch.set_num_threads(1)

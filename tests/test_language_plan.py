@@ -47,7 +47,7 @@ def test_plan_round_trips_through_json():
 def test_json_schema_is_strict_enumerates_skills_and_can_refuse():
     schema = plan_json_schema(default_registry().names)
     skill = schema["properties"]["skill"]["anyOf"]
-    assert skill[0]["enum"][:3] == ["bowl_pour", "bottle_upright", "bottle_in_drawer"] and skill[1] == {"type": "null"}
+    assert skill[0]["enum"][:3] == ["bottle_in_drawer", "bottle_upright", "bowl_pour"] and skill[1] == {"type": "null"}
     assert schema["required"] == ["refusal", "skill", "targets", "obstacles"]
     assert schema["additionalProperties"] is False and "warnings" not in schema["properties"]
     ref = schema["$defs"]["ObjectRef"]
@@ -92,7 +92,7 @@ def test_valid_plans_pass_unchanged():
 
 
 def test_unknown_skill_names_the_known_ones():
-    with pytest.raises(UnknownSkillError, match="unknown skill 'make_coffee'; the registry has: bowl_pour"):
+    with pytest.raises(UnknownSkillError, match="unknown skill 'make_coffee'; the registry has: bottle_in_drawer, bottle_upright, bowl_pour"):
         default_registry().validate(plan("make_coffee", ["mug"]))
 
 

@@ -136,7 +136,7 @@ def test_unknown_skill_is_corrected_by_the_retry(fake_llm):
     outcome = decomposer(fake_llm).decompose_with_report(INSTRUCTION)
     assert outcome.source == "llm_retry" and outcome.plan.skill == "bowl_pour"
     feedback = fake_llm.requests[1]["messages"][-1]["content"]
-    assert "unknown skill 'make_tea'; the registry has: bowl_pour, bottle_upright" in feedback
+    assert "unknown skill 'make_tea'; the registry has: bottle_in_drawer, bottle_upright, bowl_pour" in feedback
 
 
 def test_two_bad_replies_fall_back_to_the_offline_parser_with_a_warning(fake_llm):

@@ -59,10 +59,17 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
     from lano3dp.sim.protocol import SimulatorProtocol
 
 
+# Decomposers whose default skills are the simulator's tasks: language cannot import sim (it is a layer below), so
+# the public API imports the task registry first, which installs them (lano3dp.sim.tasks; MuJoCo, no torch).
+_NEED_TASK_SKILLS = ("OfflineDecomposer", "LLMDecomposer")
+
+
 def __getattr__(name: str) -> Any:
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'lano3dp' has no attribute {name!r}")
+    if name in _NEED_TASK_SKILLS:
+        importlib.import_module("lano3dp.sim.tasks")
     imported = importlib.import_module(module)
     if module == f"{__name__}.{name}":
         # `evaluate` is both a function and its module's name: importing the module makes the package

@@ -338,9 +338,9 @@ class EpisodeRunner:
 
 def carried_slot_word(task: str) -> str | None:
     """The slot word of what the gripper carries in a registered task (its extent enlarges Q*), else None."""
-    from lano3dp.language import default_registry
+    from lano3dp.sim.tasks import skill_registry
 
-    registry = default_registry()
+    registry = skill_registry()
     if task not in registry:
         return None
     spec = registry.get(task)
@@ -828,16 +828,17 @@ def run_instruction(config: RunConfig, log: Callable[[str], None] = print,
 
 
 def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str | None) -> dict[str, Any]:
-    from lano3dp.language import OfflineDecomposer, SkillRegistry, UnknownObjectError, default_registry
+    from lano3dp.language import OfflineDecomposer, SkillRegistry, UnknownObjectError
     from lano3dp.perception import ObjectObserver
     from lano3dp.policy import DiffusionPolicy
     from lano3dp.policy.pretrained import packaged_checkpoint, packaged_checkpoints
     from lano3dp.report import plot_top_view
     from lano3dp.runtime import PolicyRunner, RuntimeConfig, observe, rollout
+    from lano3dp.sim.tasks import skill_registry
 
     out = Path(config.out)
     out.mkdir(parents=True, exist_ok=True)
-    registry = SkillRegistry.load(config.registry) if config.registry else default_registry()
+    registry = SkillRegistry.load(config.registry) if config.registry else skill_registry()
     decomposer = OfflineDecomposer(registry)
     plan = decomposer.decompose(config.instruction)
     log(f"plan: {plan.summary()}")

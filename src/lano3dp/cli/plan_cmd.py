@@ -40,9 +40,10 @@ def plan(
     (an ambiguous reference, an LLM reply that was rejected) also go to stderr."""
     import warnings
 
-    from lano3dp.language import LanguageError, SkillRegistry, default_registry, plan_json_schema
+    from lano3dp.language import LanguageError, SkillRegistry, plan_json_schema
+    from lano3dp.sim.tasks import skill_registry
 
-    skills = SkillRegistry.load(registry) if registry is not None else default_registry()
+    skills = SkillRegistry.load(registry) if registry is not None else skill_registry()
     if schema:
         typer.echo(json.dumps(plan_json_schema(skills.names), indent=2))
         return

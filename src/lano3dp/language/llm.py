@@ -161,7 +161,7 @@ class LLMDecomposer:
 
     Args:
         config: endpoint settings (see `LLMConfig.from_env`).
-        registry: skills the plan must come from (default: the simulator's tasks).
+        registry: skills the plan must come from (default: `default_registry()`, the simulator's tasks).
         fallback: parser used when the LLM fails; None raises LLMPlanError instead.
         client: an `openai.OpenAI`-like client (built from `config` when None).
     """

@@ -216,7 +216,7 @@ class OfflineDecomposer:
     """Rule-based instruction -> TaskPlan.
 
     Args:
-        registry: the skills to choose from (default: the simulator's tasks).
+        registry: the skills to choose from (default: `default_registry()`, the simulator's tasks).
         matcher: optional `PhraseMatcher` for verbs and nouns outside the lexicon.
         match_threshold: minimum cosine similarity for a matcher hit.
     """

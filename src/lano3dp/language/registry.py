@@ -4,17 +4,20 @@ A skill's `slots` are the object words its policy was trained on, in the order o
 `object_clouds` axis (`attrs["object_names"]` of its dataset). A plan's targets must fill
 them in that order; `validate` enforces it so a decomposer (rules or LLM) cannot hand a
 policy its objects swapped.
+
+The built-in skills are not written here: each simulator task declares its own (`lano3dp.sim.tasks`), and
+`default_registry` returns what sim installed with `set_default_skills`, since language never imports sim.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from lano3dp.language.exceptions import SlotMismatchError, UnknownObjectError, UnknownSkillError
+from lano3dp.language.exceptions import LanguageError, SlotMismatchError, UnknownObjectError, UnknownSkillError
 from lano3dp.language.plan import TaskPlan
 from lano3dp.vocabulary import COLOURS, SIZE_WORDS, SceneObject, resolve_phrase, singular
 
@@ -188,118 +191,27 @@ def describe_scene(scene_objects: SceneObjects) -> list[str]:
     return out
 
 
-def _verbs(text: str) -> tuple[str, ...]:
-    """ "pour, tip into" -> ("pour", "tip into"): verbs and phrasal verbs, comma-separated."""
-    return tuple(v.strip() for v in text.split(","))
+# The built-in skills are the simulator's tasks, and sim sits above language, so sim hands them down: importing
+# lano3dp.sim.tasks installs its task-derived registry here. Language never imports sim (tests/test_layers.py).
+_default_skills: Callable[[], SkillRegistry] | None = None
 
 
-def _slot(word: str, *synonyms: str, accepts_any: bool = False, carried: bool = False) -> Slot:
-    return Slot(word=word, synonyms=synonyms, accepts_any=accepts_any, carried=carried)
-
-
-_DRAWER = _slot("drawer")
-_INTO_DRAWER_VERBS = _verbs(
-    "put, place, store, stow, insert, drop, move, tuck, set, stash, pack, slip, slide, put away, put in, drop in, "
-    "tuck away, stow away"
-)
-_CARRIED_BOTTLE = _slot("bottle", "flask", carried=True)
+def set_default_skills(source: Callable[[], SkillRegistry]) -> None:
+    """Make `source()` the registry `default_registry` returns (the simulator's tasks install theirs)."""
+    global _default_skills
+    _default_skills = source
 
 
 def default_registry() -> SkillRegistry:
-    """The simulator's tasks (the paper's three real tasks first, then its RLBench-style ones)."""
-    return SkillRegistry(
-        [
-            SkillSpec(
-                name="bowl_pour",
-                description="grasp the bowl and pour its contents into the pan",
-                verbs=_verbs(
-                    "pour, empty, dump, tip, decant, tilt, fill, transfer, spill, drain, tip into, tip out, "
-                    "pour out, empty out, tip over"
-                ),
-                slots=(
-                    _slot("bowl", "dish", "basin", carried=True),
-                    _slot("pan", "frying pan", "skillet", "pot", "saucepan", "wok"),
-                ),
-            ),
-            SkillSpec(
-                name="bottle_upright",
-                description="stand a bottle that lies on its side upright",
-                verbs=_verbs(
-                    "stand, upright, right, erect, raise, straighten, stand up, set upright, put upright, "
-                    "turn upright, flip upright, prop up, tip up"
-                ),
-                slots=(_CARRIED_BOTTLE,),
-            ),
-            SkillSpec(
-                name="bottle_in_drawer",
-                description="put the bottle into the open drawer",
-                verbs=_INTO_DRAWER_VERBS,
-                slots=(_CARRIED_BOTTLE, _DRAWER),
-            ),
-            SkillSpec(
-                name="open_drawer",
-                description="pull the drawer open",
-                verbs=_verbs(
-                    "open, pull, slide, yank, tug, pull out, pull open, slide out, slide open, yank open, draw out"
-                ),
-                slots=(_DRAWER,),
-            ),
-            SkillSpec(
-                name="close_microwave",
-                description="push the microwave door closed",
-                verbs=_verbs("close, shut, slam, push shut, push closed, swing shut, swing closed, push to"),
-                slots=(_slot("microwave", "microwave oven", "oven"),),
-            ),
-            SkillSpec(
-                name="phone_on_base",
-                description="put the phone onto its charging base",
-                verbs=_verbs(
-                    "put, place, dock, return, charge, set, rest, hang, replace, hang up, put back, set back, plug in"
-                ),
-                slots=(
-                    _slot(
-                        "phone",
-                        "cellphone",
-                        "cell phone",
-                        "smartphone",
-                        "mobile",
-                        "mobile phone",
-                        "handset",
-                        "telephone",
-                        carried=True,
-                    ),
-                    _slot("base", "dock", "cradle", "charger", "charging base", "charging dock", "station"),
-                ),  # fmt: skip
-            ),
-            SkillSpec(
-                name="put_item_in_drawer",
-                description="put a small item (a block by default) into the open drawer",
-                verbs=_INTO_DRAWER_VERBS,
-                slots=(_slot("block", "item", "object", "toy", accepts_any=True, carried=True), _DRAWER),
-            ),
-            SkillSpec(
-                name="sweep_to_dustpan",
-                description="sweep the dirt into the dustpan with the broom",
-                verbs=_verbs("sweep, brush, sweep up, brush up"),
-                slots=(_slot("broom", "brush", carried=True), _slot("dustpan", "dust pan")),
-            ),
-            SkillSpec(
-                name="water_plants",
-                description="pour water on the plant with the watering can",
-                verbs=_verbs("water, irrigate, sprinkle, give water, pour water"),
-                slots=(
-                    _slot("watering can", "sprinkler", "watering jug", carried=True),
-                    _slot("plant", "flower", "houseplant"),
-                ),
-            ),
-            SkillSpec(
-                name="open_wine_bottle",
-                description="take the cork or cap off the wine bottle",
-                verbs=_verbs(
-                    "open, uncork, uncap, unscrew, pop, decork, remove, pop open, twist off, twist open, pull out, "
-                    "take off, pull off"
-                ),
-                slots=(_slot("bottle", "wine bottle", "wine"),),
-            ),
-        ]
-    )
+    """The default skills: the simulator's tasks (`lano3dp.sim.tasks.skill_registry`), once that package is imported.
+
+    Raises:
+        LanguageError: nothing installed them (only language was imported): import `lano3dp.sim.tasks`, use
+            `lano3dp.OfflineDecomposer` (which does), or pass a `SkillRegistry` (`SkillRegistry.load(path)`).
+    """
+    if _default_skills is None:
+        raise LanguageError(
+            "no default skills: they are the simulator's tasks, installed when lano3dp.sim.tasks is imported; "
+            "import it (or use lano3dp.OfflineDecomposer / LLMDecomposer, which do), or pass a SkillRegistry"
+        )
+    return _default_skills()

@@ -5,13 +5,21 @@ A task also declares how language asks for it (description, verbs, slot synonyms
 see `base.py`), and the skill registry is derived from `TASKS` (`skill_registry`), so the task module
 is the one place a task's words are written.
 
+Why the derivation lives here: language (the decomposers, `default_registry`) sits below sim and
+never imports it, yet its default skills are the simulator's tasks. So sim hands them down:
+importing this package installs `skill_registry` as `lano3dp.language.default_registry`'s source
+(`set_default_skills`). Layers above sim (evaluate, the CLI) call `skill_registry` directly, and the
+public `lano3dp.OfflineDecomposer` / `LLMDecomposer` import this package first, so the README's
+`OfflineDecomposer()` plans with the built-in tasks. Skill data in a module below language would
+have kept the default import-free, but then adding a task would touch two modules.
+
 To add a task: write `tasks/<name>.py` with `@register_task class MyTask(Task): ...` and add
 one import line at the bottom of this file.
 """
 
 from __future__ import annotations
 
-from lano3dp.language.registry import SkillRegistry
+from lano3dp.language.registry import SkillRegistry, set_default_skills
 from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
 
 TASKS: dict[str, type[Task]] = {}
@@ -42,6 +50,8 @@ def skill_registry() -> SkillRegistry:
     task registered later is in it."""
     return SkillRegistry(TASKS[name].skill_spec() for name in task_names())
 
+
+set_default_skills(skill_registry)
 
 
 __all__ = ["TASKS", "Layout", "Placement", "SimState", "Task", "make_task", "register_task", "skill_registry",

@@ -25,6 +25,12 @@ def test_every_task_has_exactly_one_skill_and_every_skill_a_task():
     assert default_registry().to_json() == registry.to_json()  # what sim installed as language's default
 
 
+def test_every_module_of_the_tasks_package_is_a_registered_task():
+    # The package imports its modules itself, so a new task file needs no import line anywhere.
+    modules = {path.stem for path in (SRC / "lano3dp" / "sim" / "tasks").glob("*.py")} - {"__init__", "base"}
+    assert {cls.__module__.rsplit(".", 1)[-1] for cls in TASKS.values()} == modules
+
+
 class _StackCups(Task):
     """A task declared the way a task module declares one; it is never simulated here."""
 

@@ -1,5 +1,6 @@
 """Task registry. Each task module defines a `Task` subclass (see `base.py`) and registers it
-with the `@register_task` decorator; importing the module below adds it to `TASKS`.
+with the `@register_task` decorator; importing this package imports every task module, adding
+its task to `TASKS`.
 
 A task also declares how language asks for it (description, verbs, slot synonyms, the carried slot;
 see `base.py`), and the skill registry is derived from `TASKS` (`skill_registry`), so the task module
@@ -13,11 +14,14 @@ public `lano3dp.OfflineDecomposer` / `LLMDecomposer` import this package first, 
 `OfflineDecomposer()` plans with the built-in tasks. Skill data in a module below language would
 have kept the default import-free, but then adding a task would touch two modules.
 
-To add a task: write `tasks/<name>.py` with `@register_task class MyTask(Task): ...` and add
-one import line at the bottom of this file.
+To add a task: write `tasks/<name>.py` with `@register_task class MyTask(Task): ...`; every
+module in this package is imported (below), so that file is the whole change.
 """
 
 from __future__ import annotations
+
+import importlib
+import pkgutil
 
 from lano3dp.language.registry import SkillRegistry, set_default_skills
 from lano3dp.sim.tasks.base import Layout, Placement, SimState, Task
@@ -57,16 +61,9 @@ set_default_skills(skill_registry)
 __all__ = ["TASKS", "Layout", "Placement", "SimState", "Task", "make_task", "register_task", "skill_registry",
            "task_names"]
 
-# Task modules register themselves on import (one line per task).
-from lano3dp.sim.tasks import (  # noqa: E402,F401
-    bottle_in_drawer,
-    bottle_upright,
-    bowl_pour,
-    close_microwave,
-    open_drawer,
-    open_wine_bottle,
-    phone_on_base,
-    put_item_in_drawer,
-    sweep_to_dustpan,
-    water_plants,
-)
+# Task modules register themselves on import. Every module of this package is one (base.py aside), so a new task
+# is its module alone: no list here to extend.
+for _module in pkgutil.iter_modules(__path__):
+    if _module.name != "base":
+        importlib.import_module(f"{__name__}.{_module.name}")
+del _module

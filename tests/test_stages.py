@@ -15,8 +15,9 @@ import torch
 from typer.testing import CliRunner
 
 from lano3dp.evaluate import stage_breakdown, summarize
+from lano3dp.geometry.rotations import matrix_to_rot6d
 from lano3dp.sim import task_names
-from lano3dp.sim.robot import HOME_POSITION, rot6d, top_down
+from lano3dp.sim.robot import HOME_POSITION, top_down
 from lano3dp.sim.tasks import TASKS, Task
 from test_policy import TINY, stats_for
 from test_tasks_common import make_env
@@ -26,7 +27,7 @@ EXPECTED_STAGES = {
     "put_item_in_drawer": ("reached_block", "grasped", "lifted", "carried_to_drawer", "placed"),
     "bowl_pour": ("reached_bowl", "grasped", "lifted", "over_pan", "tilted", "poured"),
 }
-HOME_ACTION = np.concatenate([HOME_POSITION, rot6d(top_down()), [0.0]])
+HOME_ACTION = np.concatenate([HOME_POSITION, matrix_to_rot6d(top_down()), [0.0]])
 
 
 def expert_episode(env, seed: int = 0, extra_steps: int = 15) -> tuple[dict[str, int], int | None, list[dict]]:

@@ -7,18 +7,16 @@ Functions accept numpy arrays or torch tensors with arbitrary leading batch dime
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 
 def _lib(x):
-    try:
-        import torch
-
-        if isinstance(x, torch.Tensor):
-            return torch
-    except ImportError:  # pragma: no cover - torch is a hard dependency
-        pass
-    return np
+    # torch only when it is already loaded: then x may be a tensor; otherwise it cannot be one, and importing
+    # torch here would load it into the simulator, which must stay torch-free
+    torch = sys.modules.get("torch")
+    return torch if torch is not None and isinstance(x, torch.Tensor) else np
 
 
 def quat_to_matrix(quat):

@@ -42,10 +42,11 @@ from gymnasium import spaces
 
 from lano3dp.errors import Lano3dpError
 from lano3dp.geometry import RGBDFrame
+from lano3dp.geometry.rotations import matrix_to_rot6d
 from lano3dp.sim.experts import CONTROL_HZ, MotionPlan, slerp
 from lano3dp.sim.objects import ObjectInfo, primitives
 from lano3dp.sim.render import FusedRenderer
-from lano3dp.sim.robot import GripperHandle, GripperSpec, rot6d
+from lano3dp.sim.robot import GripperHandle, GripperSpec
 from lano3dp.sim.scene import FRONT_CAMERA, SHIFTED_CAMERA, TIMESTEP, CameraPose, SceneBuilder
 from lano3dp.sim.tasks import make_task
 from lano3dp.sim.tasks.base import Layout, SimState, Task, furthest_stage
@@ -369,7 +370,7 @@ class TabletopEnv(gym.Env):
         """(11,) float32: EE position (3), EE rotation 6D (6), gripper opening (m), grasp flag."""
         position, rotation = self.gripper.ee_pose(self.data)
         grasped = float(self.gripper.held_body(self.data) >= 0)
-        return np.concatenate([position, rot6d(rotation), [self.gripper.opening(self.data), grasped]]
+        return np.concatenate([position, matrix_to_rot6d(rotation), [self.gripper.opening(self.data), grasped]]
                               ).astype(np.float32)
 
     def _observe(self) -> dict:

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lano3dp.geometry.rotations import slerp
-from lano3dp.sim.robot import mat_to_quat, quat_to_mat, rot6d
+from lano3dp.geometry.rotations import matrix_to_rot6d, slerp
+from lano3dp.sim.robot import mat_to_quat, quat_to_mat
 
 CONTROL_HZ = 10.0
 OPEN, CLOSED = 0.0, 1.0
@@ -107,7 +107,7 @@ class MotionPlan:
                 s = u * u * (3 - 2 * u)
                 position = previous.position + s * (segment.position - previous.position)
                 rotation = quat_to_mat(slerp(q0, q1, s))
-                rows.append(np.concatenate([position, rot6d(rotation), [segment.gripper]]))
+                rows.append(np.concatenate([position, matrix_to_rot6d(rotation), [segment.gripper]]))
             previous = segment
         return np.asarray(rows, dtype=np.float32)
 

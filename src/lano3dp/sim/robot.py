@@ -48,12 +48,6 @@ def rot_axis(axis, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
 
 
-def rot6d(rotation: np.ndarray) -> np.ndarray:
-    """(3, 3) -> (6,): first then second column (the action/state convention). numpy only: the
-    shared `geometry.matrix_to_rot6d` probes for torch tensors, and the simulator must not import torch."""
-    return np.concatenate([rotation[:, 0], rotation[:, 1]])
-
-
 def quat_to_mat(quat) -> np.ndarray:
     """(w, x, y, z) -> (3, 3)."""
     matrix = np.zeros(9)

@@ -1,0 +1,27 @@
+"""The demo's training warnings say what a budget stop means now that the learning rate follows the budget."""
+
+import json
+
+from lano3dp.cli.demo_cmd import training_warnings
+from lano3dp.train import PROGRESS_NAME
+
+
+def _checkpoint(tmp_path, step, cpu_s):
+    checkpoint = tmp_path / f"step_{step:07d}"
+    checkpoint.mkdir()
+    (checkpoint / PROGRESS_NAME).write_text(json.dumps({"step": step, "cpu_s": cpu_s, "stopped_by_budget": True}))
+    return checkpoint
+
+
+def test_a_budget_stop_names_the_steps_and_that_the_rate_still_decayed(tmp_path):
+    config = {"steps": 7200, "policy": {"extra": {"task": "put_item_in_drawer"}}}
+    (warning,) = training_warnings(config, _checkpoint(tmp_path, 6936, 600.0))
+    assert "step 6936 of 7200 planned" in warning and "10.0 CPU-min" in warning
+    assert "decayed to 0" in warning and "did not finish" not in warning
+
+
+def test_a_short_run_is_called_under_trained_and_a_full_one_gets_no_warning(tmp_path):
+    config = {"steps": 3000, "policy": {"extra": {"task": "put_item_in_drawer"}}}
+    assert any("under-trained: 3000 steps" in w for w in training_warnings(config, _checkpoint(tmp_path, 3000, 1.0)))
+    config = {"steps": 5000, "policy": {"extra": {"task": "put_item_in_drawer"}}}
+    assert training_warnings(config, _checkpoint(tmp_path, 5000, 1.0)) == []

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -248,3 +250,28 @@ def perception_settings(kind: str, detector: str, detector_dir: Path | None, sam
     segmenter(kind, detector, detector_dir, sam_dir)
     return PerceptionSettings(segmenter=kind, detector=detector, detector_dir=detector_dir, sam_dir=sam_dir,
                               image_size=image_size)
+
+
+# GuidanceSettings field -> the parameter of `eval` and `run` that overrides it
+GUIDANCE_OVERRIDES = {"rho": "rho", "last_steps": "last_steps", "metric_gradient": "metric_push",
+                      "per_train_step": "per_train_step", "densify": "densify",
+                      "guided_clip_range": "guided_clip_range", "push_weight": "push_weight", "checked": "checked",
+                      "guide_when_needed": "guide_when_needed"}
+
+
+def episode_settings(params: Mapping[str, Any]) -> tuple[GuidanceSettings, ObstacleSettings, PerceptionSettings]:
+    """The options `eval` and `run` share, from their parsed parameters (`ctx.params`), checked: --env first (it
+    may register an obstacle shape), then the task and variation when the simulator is used, then the guidance,
+    scheduler, obstacle and perception options, built into their settings sections."""
+    env_factory(params["env"])
+    if params["env"] is None:  # a user's env has its own task names and variations
+        task_name(params["task"])
+        variation(params["variation"])
+    guidance = guidance_settings(params["guidance"], params["guidance_preset"],
+                                 **{name: params[option] for name, option in GUIDANCE_OVERRIDES.items()})
+    choice(params["scheduler"], SCHEDULERS, "--scheduler")
+    obstacle = obstacle_settings(params["obstacle_shape"], params["margin"], params["body"], params["held_radius"],
+                                 params["refit_obstacles"])
+    perception = perception_settings(params["segmenter"], params["detector"], params["detector_dir"],
+                                     params["sam_dir"], params["image_size"])
+    return guidance, obstacle, perception

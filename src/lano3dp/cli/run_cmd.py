@@ -58,17 +58,7 @@ def run_command(
     from lano3dp.evaluate import RunConfig, run_instruction
 
     console = Console()
-    _options.env_factory(env)
-    if env is None:  # a user's env has its own task names and variations
-        _options.task_name(task)
-        _options.variation(variation)
-    guidance_settings = _options.guidance_settings(
-        guidance, guidance_preset, rho=rho, last_steps=last_steps, metric_gradient=metric_push,
-        per_train_step=per_train_step, densify=densify, guided_clip_range=guided_clip_range, push_weight=push_weight,
-        checked=checked, guide_when_needed=guide_when_needed)
-    _options.choice(scheduler, _options.SCHEDULERS, "--scheduler")
-    obstacle = _options.obstacle_settings(obstacle_shape, margin, body, held_radius, refit_obstacles)
-    perception = _options.perception_settings(segmenter, detector, detector_dir, sam_dir, image_size)
+    guidance_settings, obstacle, perception = _options.episode_settings(ctx.params)
     _options.existing_path(checkpoint, "--checkpoint")
     _options.existing_path(registry, "--registry")
     _options.output_path(out, folder=True)

@@ -45,7 +45,7 @@ from lano3dp.errors import EmptyCloudError, Lano3dpError
 from lano3dp.geometry.frame import RGBDFrame, observe
 from lano3dp.geometry.rotations import quat_to_rot6d, rot6d_to_quat, slerp
 from lano3dp.guidance.checked import CheckConfig, checked_sample
-from lano3dp.guidance.costs import ObstacleSet, PositionCost, obstacle_guidance_cost
+from lano3dp.guidance.costs import ObstacleSet, PositionCost, body_reach, obstacle_guidance_cost
 from lano3dp.guidance.fitting import fit_cylinder
 from lano3dp.guidance.obstacle_model import ObstacleModel  # re-exported: configs and tests build it from here
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
@@ -426,7 +426,7 @@ class PolicyRunner:
         cost = obstacle_guidance_cost(list(self.obstacles), body=body, densify=self.config.densify,
                                       action_scale=metric_scale)
         if body is not None:
-            self.held_radius = float((np.linalg.norm(body[0], axis=1) + body[1]).max())
+            self.held_radius = body_reach(*body)
         return cost
 
     # ---- acting ----------------------------------------------------------------------------

@@ -279,6 +279,11 @@ class ObstacleSet:
         return f"ObstacleSet({self.obstacles!r})"
 
 
+def body_reach(offsets, radii) -> float:
+    """Farthest surface (m) from the EE point of a body of balls: (K, 3) offsets, (K,) radii."""
+    return float((np.linalg.norm(np.asarray(offsets, dtype=np.float64), axis=-1) + np.asarray(radii)).max())
+
+
 class SweptBody:
     """An obstacle cost on everything that moves with the end effector, not on the EE point alone.
 
@@ -311,7 +316,7 @@ class SweptBody:
     @property
     def reach(self) -> float:
         """Farthest body surface from the EE point (m): the radius of the ball the older model used."""
-        return float((self.offsets.norm(dim=-1) + self.radii).max())
+        return body_reach(self.offsets.numpy(), self.radii.numpy())
 
     def clearance(self, positions: torch.Tensor) -> torch.Tensor:
         """(B, T, 3) EE positions -> (B, T) smallest gap (m) of any body ball to the obstacle."""

@@ -5,11 +5,14 @@ Per task, the policy packaged for it (`lano3dp eval --task T` without --checkpoi
   - with a novel obstacle on the demonstrated path, by four samplers:
         none      no guidance
         A_k       the cost on the noisy sample A_k (the prior work the paper contrasts with), otherwise as default
+                  without the two additions of the project's own (the path costed from the hand, the push after
+                  sampling)
         paper     the paper's form: A_0|k, DDPM-100, S = 10, the push in normalised action units (rho 4, the
                   smallest that kept bench_guidance's synthetic paths clear), Q* from a ball of the held
                   object's diameter round the EE point, waypoints only
         default   the project's: A_0|k, the policy's DDIM, every step guided, rho 0.04 m per guided step
-                  (`MetricGradient`), segments densified x4, the hand and the held object as a swept body
+                  (`MetricGradient`), segments densified x4, the hand and the held object as a swept body, the
+                  path costed from the hand (`AnchoredPath`) and pushed clear after sampling (`push_clear`)
         sphere    the default with the previous body model (a ball of the held object's diameter round the EE)
   - and, with the default sampler (and none beside it), the harder rows of `--extra-variations`: a box,
     a cluster of two, two obstacles, one that moves (re-fitted before every chunk).
@@ -45,7 +48,7 @@ ROOT = Path(__file__).resolve().parent.parent
 # EvalConfig fields of each sampler; a guidance mode alone is the recommended preset in that mode
 SAMPLERS = {
     "none": {"guidance": "none"},
-    "A_k": {"guidance": "noisy"},
+    "A_k": {"guidance": {"mode": "noisy", "anchored": False, "repair_steps": 0}},
     "paper": {"guidance": asdict(GUIDANCE_PRESETS["paper"]), "scheduler": "ddpm", "steps": 100,
               "obstacle": {"body": "sphere"}},
     "default": {"guidance": "clean"},

@@ -114,6 +114,20 @@ def test_results_saved_flat_before_the_settings_were_nested_are_read_into_them(t
     assert cached_eval(paper) is None  # a saved config no EvalConfig could have written is not reused either
 
 
+def test_guided_results_saved_before_the_anchored_path_and_the_repair_are_not_taken_for_todays(tmp_path):
+    out = tmp_path / "guided.json"
+    today = EvalConfig(checkpoint="run", task="bowl_pour", variation="obstacle", episodes=3,
+                       guidance=GUIDANCE_PRESETS["recommended"], out=str(out))
+    before = json.loads(json.dumps(asdict(today)))
+    for name in ("anchored", "repair_steps"):
+        before["guidance"].pop(name)  # saved before the fields existed
+    write_json(out, {"config": before, "summary": {"success_rate": 0.5}})
+    read = EvalConfig.from_dict(before)
+    assert (read.guidance.anchored, read.guidance.repair_steps) == (False, 0)  # what that code ran
+    assert cached_eval(today) is None  # so today's default is evaluated anew
+    assert cached_eval(replace(today, guidance=replace(today.guidance, anchored=False, repair_steps=0))) is not None
+
+
 def test_write_json_is_atomic_and_handles_numpy_and_infinity(tmp_path):
     path = write_json(tmp_path / "a" / "r.json", {"x": np.float32(1.5), "y": np.arange(2), "z": float("inf")})
     assert json.loads(path.read_text()) == {"x": 1.5, "y": [0, 1], "z": None}

@@ -19,7 +19,7 @@ import torch
 from lano3dp.errors import Lano3dpError
 from lano3dp.geometry.frame import resize_rgb
 from lano3dp.geometry.rotations import matrix_to_rot6d
-from lano3dp.guidance import CheckConfig, Cylinder, Densified, GuidanceConfig, MetricGradient
+from lano3dp.guidance import AnchoredPath, CheckConfig, Cylinder, Densified, GuidanceConfig, MetricGradient
 from lano3dp.perception import ObjectNotFoundError, ObjectObserver, SimOracleSegmenter
 from lano3dp.perception.synthetic import Box, render_boxes, top_down_camera
 from lano3dp.policy import ActionChunk, ChunkedControl, PolicyConfig
@@ -279,13 +279,16 @@ def test_the_cost_can_be_densified_and_pushed_isotropically_in_metres(observer):
     runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
     runner.update_obstacles(frame, state)
     cost = runner.obstacle_cost
-    assert isinstance(cost, MetricGradient) and isinstance(cost.cost, Densified) and cost.cost.factor == 4
+    # the path is costed from the hand (anchored, the recommended default), densified x4, pushed in metres
+    assert isinstance(cost, MetricGradient) and isinstance(cost.cost, AnchoredPath)
+    np.testing.assert_allclose(cost.cost.start.numpy(), state[:3])
+    assert isinstance(cost.cost.cost, Densified) and cost.cost.cost.factor == 4
     # the MetricGradient weight is the normaliser scale squared: (2 / span)^2 per position axis
     np.testing.assert_allclose(cost.weight.numpy(), (2 / np.array([0.4, 0.6, 0.3])) ** 2, rtol=1e-5)
     # two waypoints either side of the obstacle: both clear, but the segment between them is not
     straddle = torch.tensor([[[OBSTACLE.center_xy[0], -0.2, 0.2], [OBSTACLE.center_xy[0], 0.2, 0.2]]])
     assert runner.obstacles.clearance(straddle).min() > 0
-    assert cost.clearance(straddle).min() < 0
+    assert cost.cost.cost.clearance(straddle).min() < 0
     with pytest.raises(ValueError, match="densify"):
         RuntimeConfig(densify=0)
 
@@ -314,6 +317,25 @@ def test_guidance_reaches_the_policy_only_with_obstacles_and_bends_the_path_clea
     free_policy = FakePolicy()
     rollout(FakeEnv([BOWL, PAN]), PolicyRunner(free_policy, observer, config), seed=0)
     assert all(call["guidance"] is None for call in free_policy.calls)
+
+
+def test_a_chunk_guidance_left_inside_the_margin_is_pushed_clear_after_sampling(observer):
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
+    # a push far too weak to bend the straight line round the obstacle
+    weak = GuidanceConfig(mode="clean", scale=1e-6, last_steps=10)
+    results = {}
+    for repair_steps in (0, 20):
+        config = RuntimeConfig(guidance=weak, obstacle=model, repair_steps=repair_steps)
+        runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
+        results[repair_steps] = (rollout(env, runner, seed=0), runner.chunks)
+    unrepaired, chunks = results[0]
+    assert unrepaired.collided and all(c.repaired == 0 for c in chunks)
+    repaired, chunks = results[20]
+    assert any(c.repaired > 0 for c in chunks) and all(c.repaired <= 20 for c in chunks)
+    # the simulator's own contact test: the pushed path clears, and each chunk was predicted to
+    assert not repaired.collided and repaired.min_clearance > 0
+    assert min(repaired.chunk_predicted_clearance) >= 0
 
 
 def test_checked_execution_resamples_with_guidance_until_the_chunk_is_clear(observer):

@@ -475,13 +475,15 @@ FLAT_EVAL_FIELDS = {
 }
 # What flat results saved before a field existed were made with, where that is not the field's default.
 EVAL_FIELDS_BEFORE = {"body": "sphere"}
+# ... and the same for fields added to a settings section (every guided result before them ran without).
+SECTION_FIELDS_BEFORE = {"guidance": {"anchored": False, "repair_steps": 0}}
 EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
 
 
 def saved_config(made: Mapping[str, Any]) -> dict[str, Any]:
     """A saved EvalConfig dict (results JSON, episode log) in today's nested form, with each measured field added
-    since it was saved set to what it was made with (EVAL_FIELDS_BEFORE, else the field's default), so adding a
-    field to EvalConfig keeps earlier results current and a killed evaluation's log resumable. A flat dict, saved
+    since it was saved set to what it was made with (EVAL_FIELDS_BEFORE, SECTION_FIELDS_BEFORE, else the field's
+    default), so adding a field keeps earlier results current and a killed evaluation's log resumable. A flat dict, saved
     before the settings were nested, has its fields moved into their sections (FLAT_EVAL_FIELDS)."""
     from dataclasses import MISSING
 
@@ -502,7 +504,10 @@ def saved_config(made: Mapping[str, Any]) -> dict[str, Any]:
         default = spec.default if spec.default_factory is MISSING else spec.default_factory()
         if spec.name in _SECTIONS:
             if isinstance(section := made.get(spec.name, {}), Mapping):  # else no EvalConfig wrote it: it won't match
-                made[spec.name] = {**json.loads(json.dumps(asdict(default))), **section}
+                before = SECTION_FIELDS_BEFORE.get(spec.name, {})
+                if spec.name == "guidance" and section.get("mode") == "none":
+                    before = {}  # unguided: the guidance fields changed nothing, so today's defaults describe it
+                made[spec.name] = {**json.loads(json.dumps(asdict(default))), **before, **section}
         elif spec.name not in made:
             made[spec.name] = json.loads(json.dumps(default))
     return made

@@ -45,7 +45,14 @@ from lano3dp.errors import EmptyCloudError, Lano3dpError
 from lano3dp.geometry.frame import RGBDFrame, observe
 from lano3dp.geometry.rotations import quat_to_rot6d, rot6d_to_quat, slerp
 from lano3dp.guidance.checked import CheckConfig, checked_sample
-from lano3dp.guidance.costs import ObstacleSet, PositionCost, body_reach, obstacle_guidance_cost
+from lano3dp.guidance.costs import (
+    MetricGradient,
+    ObstacleSet,
+    PositionCost,
+    body_reach,
+    obstacle_guidance_cost,
+    push_clear,
+)
 from lano3dp.guidance.fitting import fit_cylinder
 from lano3dp.guidance.obstacle_model import ObstacleModel  # re-exported: configs and tests build it from here
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
@@ -93,6 +100,9 @@ class RuntimeConfig:
             default the recommended preset's 4).
         guide_when_needed: sample the policy's own chunk first and guide only when its horizon comes closer
             than the margin to an obstacle (one extra unguided sample per chunk near obstacles; beyond the paper).
+        anchored: the cost sees the path from the EE's present position (`guidance.AnchoredPath`).
+        repair_steps: after a guided sample, at most this many 1 cm steps of plain cost descent until the chunk
+            clears the obstacles by half the margin (`guidance.push_clear`; 0: off).
         seed: seeds the sampling noise (one torch.Generator per runner, re-seeded on reset).
     """
 
@@ -107,6 +117,8 @@ class RuntimeConfig:
     metric_gradient: bool = _RECOMMENDED.metric_gradient
     densify: int = _RECOMMENDED.densify
     guide_when_needed: bool = _RECOMMENDED.guide_when_needed
+    anchored: bool = _RECOMMENDED.anchored
+    repair_steps: int = _RECOMMENDED.repair_steps
     seed: int = 0
 
     def __post_init__(self):
@@ -116,6 +128,8 @@ class RuntimeConfig:
             raise ValueError(f"n_action_steps must be >= 1, got {self.n_action_steps}")
         if self.densify < 1:
             raise ValueError(f"densify must be >= 1, got {self.densify}")
+        if self.repair_steps < 0:
+            raise ValueError(f"repair_steps must be >= 0, got {self.repair_steps}")
 
     @property
     def guided(self) -> bool:
@@ -139,7 +153,8 @@ class RuntimeConfig:
                    obstacle=ObstacleModel(shape=obstacle.shape, margin=obstacle.margin, body=obstacle.body,
                                           held_radius=obstacle.held_radius, refit_every_chunk=obstacle.refit),
                    checked=checked, metric_gradient=guidance.metric_gradient, densify=guidance.densify,
-                   guide_when_needed=guidance.guide_when_needed, seed=seed)
+                   guide_when_needed=guidance.guide_when_needed, anchored=guidance.anchored,
+                   repair_steps=guidance.repair_steps, seed=seed)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
@@ -162,6 +177,7 @@ class ChunkRecord:
         predicted_clearance: smallest clearance (m) of the executed waypoints to the fitted obstacles, as the
             runner sees them (None without obstacles).
         clear: False when checked execution found no collision-free try.
+        repaired: plain cost-descent steps taken on the sample afterwards (`RuntimeConfig.repair_steps`).
         trajectory: (H, 10) the whole sampled horizon (metric).
     """
 
@@ -172,6 +188,7 @@ class ChunkRecord:
     scale: float = 0.0
     predicted_clearance: float | None = None
     clear: bool = True
+    repaired: int = 0
     trajectory: np.ndarray | None = None
 
 
@@ -416,7 +433,7 @@ class PolicyRunner:
                 self.obstacle_cost = None
             except (PerceptionError, EmptyCloudError):
                 self.stale_obstacle_fits += 1  # the arm hides it now: keep the last fit
-        if self.obstacle_cost is None or model.body == "swept":
+        if self.obstacle_cost is None or model.body == "swept" or self.config.anchored:
             self.obstacle_cost = self.guidance_cost(frame, np.asarray(state, dtype=np.float32))
 
     def guidance_cost(self, frame: RGBDFrame, state: np.ndarray) -> PositionCost:
@@ -424,7 +441,7 @@ class PolicyRunner:
         body = self.swept_body(frame, state) if self.config.obstacle.body == "swept" else None
         metric_scale = self.policy.normalizer.scale("action")[:3] if self.config.metric_gradient else None
         cost = obstacle_guidance_cost(list(self.obstacles), body=body, densify=self.config.densify,
-                                      action_scale=metric_scale)
+                                      action_scale=metric_scale, start=state[:3] if self.config.anchored else None)
         if body is not None:
             self.held_radius = body_reach(*body)
         return cost
@@ -480,10 +497,12 @@ class PolicyRunner:
             if chunk is None:
                 chunk = sample(guidance)
             record.scale = guidance.scale if guidance is not None else 0.0
-            if cost is not None:
-                with torch.no_grad():
-                    executed = chunk.trajectory[:, execute, :3].float()
-                    record.predicted_clearance = float(cost.clearance(executed).min())
+        if cost is not None and cfg.guided and cfg.repair_steps and record.scale > 0:
+            chunk, record.repaired = self.push_chunk_clear(chunk, start)
+        if cost is not None and (cfg.checked is None or record.repaired):
+            with torch.no_grad():
+                executed = chunk.trajectory[:, execute, :3].float()
+                record.predicted_clearance = float(cost.clearance(executed).min())
         record.sample_s = time.perf_counter() - sample_started
         chunk = ActionChunk(chunk.trajectory[:, execute], chunk.trajectory)
         record.trajectory = chunk.trajectory[0].detach().cpu().numpy().astype(np.float32)
@@ -495,6 +514,19 @@ class PolicyRunner:
                                   f"(up to rho={record.scale:g}); predicted clearance "
                                   f"{record.predicted_clearance:.3f} m")
         return chunk
+
+    def push_chunk_clear(self, chunk: ActionChunk, start: int) -> tuple[ActionChunk, int]:
+        """`chunk` with its waypoints from horizon index `start` pushed to half the margin from every obstacle by
+        plain cost descent (`guidance.push_clear`, at most `repair_steps` 1 cm steps), and the steps taken."""
+        cost = self.obstacle_cost
+        cost = cost.cost if isinstance(cost, MetricGradient) else cost  # descend in metres, every axis alike
+        trajectory = chunk.trajectory.detach().clone()
+        moved, steps = push_clear(cost, trajectory[:, start:, :3].double(), clearance=self.config.obstacle.margin / 2,
+                                  iterations=self.config.repair_steps)
+        if steps == 0:
+            return chunk, 0
+        trajectory[:, start:, :3] = moved.to(trajectory.dtype)
+        return ActionChunk(trajectory[:, start:start + chunk.actions.shape[1]], trajectory), steps
 
     def act(self, frame: RGBDFrame, state: np.ndarray) -> np.ndarray:
         """Observe, let the policy re-plan (through `plan`) when its queue is empty, and return the next (10,)
@@ -534,6 +566,7 @@ class EpisodeResult:
         path_length: EE path length (m), from the robot state.
         chunk_latency_s: planning time of every chunk (`ChunkRecord.latency_s`), seconds.
         chunk_tries: samples drawn per chunk (checked execution).
+        chunk_repaired: plain cost-descent steps taken after sampling, per chunk (`RuntimeConfig.repair_steps`).
         chunk_predicted_clearance: per chunk, the runner's own clearance estimate of the executed waypoints.
         ee_path: (steps + 1, 3) EE positions, metres (kept for plots; dropped from JSON by default).
         obstacles: the fitted obstacle shapes the runner guided against (see `describe_obstacle`).
@@ -560,6 +593,7 @@ class EpisodeResult:
     chunk_predicted_clearance: list[float | None]
     ee_path: np.ndarray
     obstacles: list[dict[str, Any]] = field(default_factory=list)
+    chunk_repaired: list[int] = field(default_factory=list)
     held_radius: float | None = None
     held_clouds: int = 0
     partly_hidden: list[str] = field(default_factory=list)
@@ -655,6 +689,7 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
         min_clearance=float(min(clearances)) if clearances else None, path_length=path_length(ee_path),
         chunk_latency_s=[round(c.latency_s, 5) for c in runner.chunks],
         chunk_tries=[c.tries for c in runner.chunks],
+        chunk_repaired=[c.repaired for c in runner.chunks],
         chunk_predicted_clearance=[None if c.predicted_clearance is None else round(c.predicted_clearance, 5)
                                    for c in runner.chunks],
         ee_path=ee_path,

@@ -204,6 +204,12 @@ CHECKED = typer.Option(None, "--checked/--no-checked", help="Checked execution: 
 GUIDE_WHEN_NEEDED = typer.Option(None, "--guide-when-needed/--no-guide-when-needed",
                                  help="Guide a chunk only when the policy's own one comes within the margin of an "
                                       f"obstacle (default: {_preset_values('guide_when_needed')}).")
+ANCHORED = typer.Option(None, "--anchored/--no-anchored",
+                        help="Cost the path from the hand's present position, so the step to the first action is "
+                             f"pushed clear too (default: {_preset_values('anchored')}).")
+REPAIR_STEPS = typer.Option(None, "--repair-steps", min=0,
+                            help="After a guided sample, at most this many 1 cm steps of plain cost descent until "
+                                 f"the chunk clears by half the margin (0: off; default: {_preset_values('repair_steps')}).")
 OBSTACLE_SHAPE = typer.Option(ObstacleSettings.shape, "--obstacle-shape", metavar="NAME", help=obstacle_shape_help())
 MARGIN = typer.Option(ObstacleSettings.margin, "--margin", min=0.0,
                       help="Safety margin (m) beyond contact, part of Q*.")
@@ -256,7 +262,8 @@ def perception_settings(kind: str, detector: str, detector_dir: Path | None, sam
 GUIDANCE_OVERRIDES = {"rho": "rho", "last_steps": "last_steps", "metric_gradient": "metric_push",
                       "per_train_step": "per_train_step", "densify": "densify",
                       "guided_clip_range": "guided_clip_range", "push_weight": "push_weight", "checked": "checked",
-                      "guide_when_needed": "guide_when_needed"}
+                      "guide_when_needed": "guide_when_needed", "anchored": "anchored",
+                      "repair_steps": "repair_steps"}
 
 
 def episode_settings(params: Mapping[str, Any]) -> tuple[GuidanceSettings, ObstacleSettings, PerceptionSettings]:

@@ -35,6 +35,8 @@ def eval_command(
     push_weight: str = _options.PUSH_WEIGHT,
     checked: bool = _options.CHECKED,
     guide_when_needed: bool = _options.GUIDE_WHEN_NEEDED,
+    anchored: bool = _options.ANCHORED,
+    repair_steps: int = _options.REPAIR_STEPS,
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
     obstacle_shape: str = _options.OBSTACLE_SHAPE,

@@ -12,10 +12,10 @@ from typing import TYPE_CHECKING, Any
 # public name -> module that defines it
 _EXPORTS = {
     "CheckConfig": "checked", "CheckedResult": "checked", "checked_sample": "checked",
-    "Cylinder": "costs", "Densified": "costs", "MetricGradient": "costs", "Obstacle": "costs",
+    "AnchoredPath": "costs", "Cylinder": "costs", "Densified": "costs", "MetricGradient": "costs", "Obstacle": "costs",
     "ObstacleSet": "costs", "OrientedBox": "costs", "PointCloudObstacle": "costs", "PositionCost": "costs",
     "Sphere": "costs", "SweptBody": "costs", "densify": "costs", "min_clearance": "costs",
-    "obstacle_guidance_cost": "costs", "ObstacleModel": "obstacle_model",
+    "obstacle_guidance_cost": "costs", "push_clear": "costs", "ObstacleModel": "obstacle_model",
     "CollisionError": "exceptions", "GuidanceError": "exceptions",
     "fit_box": "fitting", "fit_cylinder": "fitting",
     "DenoiseStep": "sampler", "GuidanceConfig": "sampler", "GuidanceMode": "sampler", "denoise": "sampler",
@@ -26,19 +26,20 @@ _EXPORTS = {
 }
 
 __all__ = [
-    "GUIDANCE_PRESETS", "SAFETY_MARGIN", "CheckConfig", "CheckedResult", "CollisionError", "Cylinder", "DenoiseStep",
+    "GUIDANCE_PRESETS", "SAFETY_MARGIN", "AnchoredPath", "CheckConfig", "CheckedResult", "CollisionError", "Cylinder", "DenoiseStep",
     "Densified", "GuidanceConfig",
     "GuidanceError", "GuidanceMode", "GuidanceSettings", "MetricGradient", "Obstacle", "ObstacleSet",
     "ObstacleModel", "ObstacleSettings", "ObstacleShape", "OrientedBox",
     "PointCloudObstacle", "PositionCost", "Sphere", "SweptBody", "UnknownObstacleShapeError", "checked_sample",
     "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "min_clearance", "obstacle_guidance_cost",
-    "obstacle_shape_names",
+    "obstacle_shape_names", "push_clear",
     "register_obstacle_shape", "unregister_obstacle_shape",
 ]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports on demand
     from lano3dp.guidance.checked import CheckConfig, CheckedResult, checked_sample
     from lano3dp.guidance.costs import (
+        AnchoredPath,
         Cylinder,
         Densified,
         MetricGradient,
@@ -52,6 +53,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
         densify,
         min_clearance,
         obstacle_guidance_cost,
+        push_clear,
     )
     from lano3dp.guidance.exceptions import CollisionError, GuidanceError
     from lano3dp.guidance.fitting import fit_box, fit_cylinder

@@ -414,8 +414,67 @@ class MetricGradient:
         return f"MetricGradient({self.cost!r}, weight={self.weight.tolist()})"
 
 
+class AnchoredPath:
+    """A cost on the path the hand will take: from the EE's present position through the waypoints (beyond the
+    paper).
+
+    The sampled horizon starts at the first action, not at the hand; a cost on the waypoints alone never sees
+    the segment from the hand to that first action, and a guided chunk could leap across an obstacle in one
+    step with every waypoint clear (a traced bottle_in_drawer touch: 18 cm from the hand to a first waypoint
+    beyond the obstacle).
+
+    Args:
+        cost: the obstacles (an `ObstacleSet`, `Densified`, ...), on metric positions.
+        start: (3,) the EE's present position, m.
+    """
+
+    def __init__(self, cost: PositionCost, start):
+        self.cost = cost
+        self.start = torch.as_tensor(np.asarray(start, dtype=np.float64).reshape(3))
+
+    def path(self, positions: torch.Tensor) -> torch.Tensor:
+        """(B, T, 3) waypoints -> (B, 1 + T, 3): the present position, then the waypoints."""
+        _check_positions(positions)
+        return torch.cat([self.start.to(positions).expand(positions.shape[0], 1, 3), positions], 1)
+
+    def clearance(self, positions: torch.Tensor) -> torch.Tensor:
+        """Along the path from the hand, but not at the hand itself: where it is now no waypoint can change, and
+        a check or a push that counted it would never finish while the hand is inside the margin."""
+        return self.cost.clearance(self.path(positions))[:, 1:]
+
+    def __call__(self, positions: torch.Tensor) -> torch.Tensor:
+        return self.cost(self.path(positions))
+
+    def __repr__(self):
+        return f"AnchoredPath({self.cost!r}, start={self.start.tolist()})"
+
+
+def push_clear(cost: PositionCost, positions: torch.Tensor, *, clearance: float, step: float = 0.01,
+               iterations: int = 20) -> tuple[torch.Tensor, int]:
+    """Move waypoints down `cost` by plain gradient steps (no network) until `cost.clearance` is at least
+    `clearance` everywhere, or `iterations` steps were taken (beyond the paper).
+
+    Guidance pushes a sample while the network pulls it back towards the demonstrations, so a guided chunk can
+    end inside the margin; this finishes the push on the sample itself. Every waypoint the cost pushes moves
+    `step` metres per iteration along its own descent direction, so a deep waypoint is not flung far in one
+    go. (B, T, 3) metric positions -> (the moved positions, iterations taken).
+    """
+    _check_positions(positions)
+    moved = positions.detach().clone()
+    for taken in range(iterations):
+        with torch.no_grad():
+            if float(cost.clearance(moved).min()) >= clearance:
+                return moved, taken
+        with torch.enable_grad():
+            variable = moved.clone().requires_grad_(True)
+            (gradient,) = torch.autograd.grad(cost(variable).sum(), variable)
+        norm = gradient.norm(dim=-1, keepdim=True)
+        moved = moved - step * gradient / norm.clamp_min(1e-12) * (norm > 1e-12)
+    return moved, iterations
+
+
 def obstacle_guidance_cost(obstacles: Sequence[PositionCost], *, body: tuple[np.ndarray, np.ndarray] | None = None,
-                  densify: int = 1, action_scale=None) -> PositionCost:
+                           densify: int = 1, action_scale=None, start=None) -> PositionCost:
     """The one recipe from fitted obstacles to the cost guidance descends (runtime, `guidance-figures`, benches).
 
     Args:
@@ -425,12 +484,16 @@ def obstacle_guidance_cost(obstacles: Sequence[PositionCost], *, body: tuple[np.
         densify: points per path segment the cost sees (`Densified`; 1: the waypoints only, the paper's).
         action_scale: the normaliser's position scale s (1/m) for an isotropic push in metres (`MetricGradient`);
             None: the paper's push in normalised units.
+        start: (3,) the EE's present position, to cost the path from it through the waypoints (`AnchoredPath`);
+            None: the waypoints alone (the paper's).
     """
     if body is not None:
         obstacles = [SweptBody(obstacle, *body) for obstacle in obstacles]
     cost: PositionCost = ObstacleSet(list(obstacles))
     if densify > 1:
         cost = Densified(cost, densify)
+    if start is not None:
+        cost = AnchoredPath(cost, start)
     if action_scale is not None:
         cost = MetricGradient(cost, action_scale)
     return cost

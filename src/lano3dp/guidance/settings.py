@@ -28,8 +28,9 @@ BODY_MODELS = ("swept", "sphere")
 class GuidanceSettings:
     """How chunks are guided. The defaults are the recommended preset: A_0|k cost on every DDIM step (S = 100
     training steps covers all 10), an isotropic push of 4 cm per guided step on the path densified x4, every push
-    of the same weight and the scheduler's clipping; the closed-loop results (results/obstacles*.md) were made
-    with these. The synthetic sweep (results/bench_guidance.json, issue 3) has no row of them: its
+    of the same weight and the scheduler's clipping, the path costed from the hand and pushed clear after
+    sampling; the closed-loop results (results/obstacles*.md) were made with these (those before
+    results/obstacles_anchored.md without the last two). The synthetic sweep (results/bench_guidance.json, issue 3) has no row of them: its
     nearest, DDIM-10 at rho 0.04 on every step with push_weight "alpha_bar" and guided_clip_range 3, left 1% of
     sampled paths with a segment through the obstacle (2 cm: 19%). GUIDANCE_PRESETS["paper"] is the paper's form.
 
@@ -46,6 +47,12 @@ class GuidanceSettings:
         push_weight: "constant" (the paper) or "alpha_bar" (each push times sqrt(abar_k abar_k-1); for DDIM).
         checked: checked execution (re-sample with a larger rho while the executed part collides).
         guide_when_needed: guide a chunk only when the policy's own one comes within the margin of an obstacle.
+        anchored: cost the path from the EE's present position through the executed waypoints, so the step from
+            the hand to the first action is pushed clear too (`guidance.AnchoredPath`; the paper costs the
+            horizon's waypoints alone).
+        repair_steps: after sampling, at most this many 1 cm steps of plain descent on the cost move the chunk's
+            waypoints until they clear every obstacle by half the margin (`guidance.push_clear`; 0: off, the
+            paper's): guidance pushes while the network pulls back, so a guided chunk can end inside the margin.
     """
 
     mode: str = "clean"
@@ -58,6 +65,8 @@ class GuidanceSettings:
     push_weight: str = "constant"
     checked: bool = False
     guide_when_needed: bool = False
+    anchored: bool = True
+    repair_steps: int = 20
 
     def __post_init__(self):
         if self.mode not in GUIDANCE_MODES:
@@ -66,6 +75,8 @@ class GuidanceSettings:
             raise ValueError(f"guidance rho and S must be >= 0, got {self.rho}, {self.last_steps}")
         if self.densify < 1:
             raise ValueError(f"densify must be >= 1, got {self.densify}")
+        if self.repair_steps < 0:
+            raise ValueError(f"repair_steps must be >= 0, got {self.repair_steps}")
         if self.guided_clip_range is not None and not (0 < self.guided_clip_range < math.inf):
             raise ValueError(f"guided_clip_range must be a finite number > 0 or None, got {self.guided_clip_range}")
         if self.push_weight not in PUSH_WEIGHTS:
@@ -82,7 +93,8 @@ GUIDANCE_PRESETS: dict[str, GuidanceSettings] = {
     # smallest with which bench_guidance's DDPM-100 waypoints cleared the obstacle, 1% colliding; the segments
     # between them did not). The paper also sampled with DDPM-100 and kept a ball of the held object's diameter
     # clear: add scheduler "ddpm", steps 100 and ObstacleSettings(body="sphere").
-    "paper": GuidanceSettings(rho=4.0, last_steps=10, metric_gradient=False, densify=1),
+    "paper": GuidanceSettings(rho=4.0, last_steps=10, metric_gradient=False, densify=1, anchored=False,
+                              repair_steps=0),
 }
 
 

@@ -215,7 +215,7 @@ def markdown_report(results: dict) -> str:
             lines += [f"Clean success: {percent(clean['success_rate'])} ({_interval(clean['success_interval'])}), "
                       f"{clean['episodes']} episodes.", ""]
         table = []
-        for key, r in entry["rows"].items():
+        for r in entry["rows"].values():
             table.append([r["variation"], r["sampler"], r["episodes_with_obstacles"],
                           f"{percent(r['success_rate'])} ({_interval(r['success_interval'])})",
                           r.get("ratio_to_clean"),

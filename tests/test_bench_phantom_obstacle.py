@@ -5,7 +5,6 @@ import os
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from bench_loader import load_bench  # noqa: E402
-
 from lano3dp.policy.pretrained import packaged_checkpoint  # noqa: E402
 
 bench = load_bench("bench_phantom_obstacle")

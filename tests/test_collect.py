@@ -4,8 +4,8 @@ import numpy as np
 from typer.testing import CliRunner
 
 from lano3dp.cli import app
-from lano3dp.data import EpisodeStore
 from lano3dp.collect import collect
+from lano3dp.data import EpisodeStore
 
 
 def test_collect_writes_the_documented_keys_and_resumes(tmp_path):

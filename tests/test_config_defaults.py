@@ -126,7 +126,8 @@ def captured(monkeypatch):
 
 
 OPTIONS = ["--guidance", "clean", "--guidance-preset", "paper", "--rho", "2", "--guided-clip-range", "3",
-           "--push-weight", "alpha_bar", "--checked", "--anchored", "--repair-steps", "5", "--margin", "0.03", "--body", "sphere", "--held-radius", "0.05",
+           "--push-weight", "alpha_bar", "--checked", "--anchored", "--repair-steps", "5",
+           "--margin", "0.03", "--body", "sphere", "--held-radius", "0.05",
            "--refit-obstacles", "--obstacle-shape", "box", "--image-size", "96"]
 
 

@@ -20,8 +20,8 @@ from typer.testing import CliRunner
 
 from lano3dp import EvalConfig, evaluate
 from lano3dp.cli import app
-from lano3dp.data import EpisodeStore
 from lano3dp.collect import collect_from_env
+from lano3dp.data import EpisodeStore
 from lano3dp.env_factory import load_factory
 from lano3dp.evaluate import observation_types_for_workers
 from lano3dp.geometry.rotations import matrix_to_rot6d

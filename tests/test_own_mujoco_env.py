@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from lano3dp import EvalConfig, evaluate
-from lano3dp.data import EpisodeStore
 from lano3dp.collect import CollectionError, collect_from_env
+from lano3dp.data import EpisodeStore
 from lano3dp.geometry.rotations import matrix_to_rot6d, rot6d_to_matrix
 from lano3dp.mujoco_frame import MujocoFrameError, mujoco_frame
 from lano3dp.perception import ObjectObserver, SimOracleSegmenter

@@ -248,7 +248,8 @@ def test_a_target_that_is_not_carried_leaves_only_the_gripper_in_q_star(observer
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(body="sphere", gripper_radius=0.02)),
+    sphere = ObstacleModel(body="sphere", gripper_radius=0.02)
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=sphere),
                           obstacle_phrases=["obstacle_0"])
     runner.update_obstacles(frame, state)
     assert runner.held_object is None and runner.held_radius == 0.02
@@ -341,7 +342,8 @@ def test_a_chunk_guidance_left_inside_the_margin_is_pushed_clear_after_sampling(
 def test_checked_execution_resamples_with_guidance_until_the_chunk_is_clear(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     policy = FakePolicy()
-    config = RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.03), checked=CheckConfig(initial_scale=1.0))
+    config = RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.03),
+                           checked=CheckConfig(initial_scale=1.0))
     result = rollout(env, PolicyRunner(policy, observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
     assert not result.collided
     assert max(result.chunk_tries) >= 2  # the straight line hit the obstacle at least once

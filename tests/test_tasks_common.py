@@ -186,7 +186,8 @@ def test_obstacle_variation_finds_room_on_the_expert_path_in_most_layouts(task):
     if task in NO_OBSTACLE_ROOM:
         assert placed <= 3, f"{task}: {placed}/20 layouts now have room; move it out of NO_OBSTACLE_ROOM"
     else:
-        assert placed >= (6 if task in SHORT_CARRY else 9), f"{task}: an obstacle found room in only {placed}/20 layouts"
+        assert placed >= (6 if task in SHORT_CARRY else 9), \
+            f"{task}: an obstacle found room in only {placed}/20 layouts"
 
 
 @pytest.mark.parametrize("task", TASKS)

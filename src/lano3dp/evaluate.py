@@ -483,8 +483,8 @@ EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
 def saved_config(made: Mapping[str, Any]) -> dict[str, Any]:
     """A saved EvalConfig dict (results JSON, episode log) in today's nested form, with each measured field added
     since it was saved set to what it was made with (EVAL_FIELDS_BEFORE, SECTION_FIELDS_BEFORE, else the field's
-    default), so adding a field keeps earlier results current and a killed evaluation's log resumable. A flat dict, saved
-    before the settings were nested, has its fields moved into their sections (FLAT_EVAL_FIELDS)."""
+    default), so adding a field keeps earlier results current and a killed evaluation's log resumable. A flat
+    dict, saved before the settings were nested, has its fields moved into their sections (FLAT_EVAL_FIELDS)."""
     from dataclasses import MISSING
 
     made = json.loads(json.dumps(dict(made)))  # a copy, in JSON types

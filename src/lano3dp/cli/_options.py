@@ -209,7 +209,8 @@ ANCHORED = typer.Option(None, "--anchored/--no-anchored",
                              f"pushed clear too (default: {_preset_values('anchored')}).")
 REPAIR_STEPS = typer.Option(None, "--repair-steps", min=0,
                             help="After a guided sample, at most this many 1 cm steps of plain cost descent until "
-                                 f"the chunk clears by half the margin (0: off; default: {_preset_values('repair_steps')}).")
+                                 "the chunk clears by half the margin (0: off; default: "
+                                 f"{_preset_values('repair_steps')}).")
 OBSTACLE_SHAPE = typer.Option(ObstacleSettings.shape, "--obstacle-shape", metavar="NAME", help=obstacle_shape_help())
 MARGIN = typer.Option(ObstacleSettings.margin, "--margin", min=0.0,
                       help="Safety margin (m) beyond contact, part of Q*.")

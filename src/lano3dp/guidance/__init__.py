@@ -26,8 +26,8 @@ _EXPORTS = {
 }
 
 __all__ = [
-    "GUIDANCE_PRESETS", "SAFETY_MARGIN", "AnchoredPath", "CheckConfig", "CheckedResult", "CollisionError", "Cylinder", "DenoiseStep",
-    "Densified", "GuidanceConfig",
+    "GUIDANCE_PRESETS", "SAFETY_MARGIN", "AnchoredPath", "CheckConfig", "CheckedResult", "CollisionError",
+    "Cylinder", "DenoiseStep", "Densified", "GuidanceConfig",
     "GuidanceError", "GuidanceMode", "GuidanceSettings", "MetricGradient", "Obstacle", "ObstacleSet",
     "ObstacleModel", "ObstacleSettings", "ObstacleShape", "OrientedBox",
     "PointCloudObstacle", "PositionCost", "Sphere", "SweptBody", "UnknownObstacleShapeError", "checked_sample",

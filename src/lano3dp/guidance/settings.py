@@ -30,9 +30,10 @@ class GuidanceSettings:
     training steps covers all 10), an isotropic push of 4 cm per guided step on the path densified x4, every push
     of the same weight and the scheduler's clipping, the path costed from the hand and pushed clear after
     sampling; the closed-loop results (results/obstacles*.md) were made with these (those before
-    results/obstacles_anchored.md without the last two). The synthetic sweep (results/bench_guidance.json, issue 3) has no row of them: its
-    nearest, DDIM-10 at rho 0.04 on every step with push_weight "alpha_bar" and guided_clip_range 3, left 1% of
-    sampled paths with a segment through the obstacle (2 cm: 19%). GUIDANCE_PRESETS["paper"] is the paper's form.
+    results/obstacles_anchored.md without the last two). The synthetic sweep (results/bench_guidance.json,
+    issue 3) has no row of them: its nearest, DDIM-10 at rho 0.04 on every step with push_weight "alpha_bar" and
+    guided_clip_range 3, left 1% of sampled paths with a segment through the obstacle (2 cm: 19%).
+    GUIDANCE_PRESETS["paper"] is the paper's form.
 
     Attributes:
         mode: "none", "noisy" (cost on A_k) or "clean" (the paper's A_0|k).
@@ -47,7 +48,7 @@ class GuidanceSettings:
         push_weight: "constant" (the paper) or "alpha_bar" (each push times sqrt(abar_k abar_k-1); for DDIM).
         checked: checked execution (re-sample with a larger rho while the executed part collides).
         guide_when_needed: guide a chunk only when the policy's own one comes within the margin of an obstacle.
-        anchored: cost the path from the EE's present position through the executed waypoints, so the step from
+        anchored: cost the path from the EE's present position through the waypoints, so the step from
             the hand to the first action is pushed clear too (`guidance.AnchoredPath`; the paper costs the
             horizon's waypoints alone).
         repair_steps: after sampling, at most this many 1 cm steps of plain descent on the cost move the chunk's

@@ -462,9 +462,8 @@ def push_clear(cost: PositionCost, positions: torch.Tensor, *, clearance: float,
     _check_positions(positions)
     moved = positions.detach().clone()
     for taken in range(iterations):
-        with torch.no_grad():
-            if float(cost.clearance(moved).min()) >= clearance:
-                return moved, taken
+        if float(min_clearance(cost, moved).min()) >= clearance:
+            return moved, taken
         with torch.enable_grad():
             variable = moved.clone().requires_grad_(True)
             (gradient,) = torch.autograd.grad(cost(variable).sum(), variable)

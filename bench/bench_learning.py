@@ -32,7 +32,8 @@ from pathlib import Path
 
 import torch
 
-from lano3dp.evaluate import EvalConfig, write_json
+from lano3dp.evaluate import EvalConfig
+from lano3dp.jsonio import write_json
 from lano3dp.pipeline import collect_stage, eval_stage, train_stage
 from lano3dp.policy.checkpoint import list_checkpoints
 from lano3dp.report import wilson_interval

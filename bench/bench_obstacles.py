@@ -39,7 +39,8 @@ from collections import Counter
 from dataclasses import asdict
 from pathlib import Path
 
-from lano3dp.evaluate import GUIDANCE_PRESETS, EvalConfig, write_json
+from lano3dp.evaluate import GUIDANCE_PRESETS, EvalConfig
+from lano3dp.jsonio import write_json
 from lano3dp.pipeline import eval_stage
 from lano3dp.policy.pretrained import packaged_checkpoint
 from lano3dp.report import markdown_table, percent, wilson_interval

@@ -18,7 +18,8 @@ import sys
 import time
 from pathlib import Path
 
-from lano3dp.evaluate import EvalConfig, write_json
+from lano3dp.evaluate import EvalConfig
+from lano3dp.jsonio import write_json
 from lano3dp.pipeline import eval_stage
 from lano3dp.policy.pretrained import packaged_checkpoints, packaged_record
 from lano3dp.report import markdown_table, percent, wilson_interval

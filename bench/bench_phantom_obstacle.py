@@ -24,8 +24,9 @@ import sys
 import time
 from pathlib import Path
 
-from lano3dp.evaluate import EpisodeRunner, EvalConfig, evaluation_seeds, write_json
+from lano3dp.evaluate import EpisodeRunner, EvalConfig, evaluation_seeds
 from lano3dp.geometry.frame import observe
+from lano3dp.jsonio import write_json
 from lano3dp.policy.pretrained import packaged_checkpoint
 from lano3dp.report import percent, wilson_interval
 from lano3dp.runtime import PolicyRunner, scene_obstacles

@@ -35,8 +35,8 @@ import torch.nn.functional as F
 from torch.utils.data import default_collate
 
 from lano3dp.data import EpisodeStore, SequenceDataset
-from lano3dp.evaluate import write_json
 from lano3dp.guidance import GuidanceConfig
+from lano3dp.jsonio import write_json
 from lano3dp.policy import DiffusionPolicy, PolicyConfig
 from lano3dp.policy.checkpoint import EMA
 

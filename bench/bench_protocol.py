@@ -54,7 +54,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from lano3dp.evaluate import GUIDANCE_PRESETS, EvalConfig, write_json
+from lano3dp.evaluate import GUIDANCE_PRESETS, EvalConfig
 from lano3dp.executor import (
     Cell,
     CellFailedError,
@@ -65,6 +65,7 @@ from lano3dp.executor import (
     make_executor,
     train_cell,
 )
+from lano3dp.jsonio import write_json
 from lano3dp.pipeline import cached_eval
 from lano3dp.report import markdown_table, percent, plot_success_intervals, plot_variation_drops, wilson_interval
 

@@ -8,8 +8,9 @@ from dataclasses import asdict, replace
 import numpy as np
 import pytest
 
-from lano3dp.evaluate import EvalConfig, runtime_config, summarize, write_json
+from lano3dp.evaluate import EvalConfig, runtime_config, summarize
 from lano3dp.guidance import GUIDANCE_PRESETS, GuidanceSettings, ObstacleSettings
+from lano3dp.jsonio import write_json
 from lano3dp.pipeline import cached_eval, eval_stage
 from lano3dp.report import markdown_table, plot_rates, plot_top_view, wilson_interval
 

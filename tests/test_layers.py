@@ -1,9 +1,9 @@
 """Layering as a test: a lower layer never imports an upper one, counting function-local imports too.
 
-Layers, lowest first (README "Design", docs/architecture.md): errors, registry, video, geometry, vocabulary < data,
-perception, language, guidance, policy, mujoco_frame, wrappers < sim < runtime, train, evaluate, collect, env_factory,
-pipeline, executor, augment, locking, report < cli. Modules of one layer may import one another (policy uses guidance's
-sampler).
+Layers, lowest first (README "Design", docs/architecture.md): errors, registry, video, jsonio, geometry,
+vocabulary < data, perception, language, guidance, policy, mujoco_frame, wrappers < sim < runtime, train, evaluate,
+collect, env_factory, pipeline, executor, augment, locking, report < cli. Modules of one layer may import one another
+(policy uses guidance's sampler).
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "lano3dp"
 LAYERS = (
-    ("errors", "registry", "video", "geometry", "vocabulary"),
+    ("errors", "registry", "video", "jsonio", "geometry", "vocabulary"),
     ("data", "perception", "language", "guidance", "policy", "mujoco_frame", "wrappers"),
     ("sim",),
     ("runtime", "train", "evaluate", "collect", "env_factory", "pipeline", "executor", "augment", "locking",

@@ -28,7 +28,6 @@ evaluation sees what training saw.
 from __future__ import annotations
 
 import json
-import math
 import multiprocessing as mp
 import os
 import shlex
@@ -46,6 +45,7 @@ import numpy as np
 from lano3dp import env_factory
 from lano3dp.errors import Lano3dpError
 from lano3dp.guidance.settings import GUIDANCE_PRESETS, GuidanceSettings, ObstacleSettings  # noqa: F401 (re-export)
+from lano3dp.jsonio import to_jsonable, write_json, write_text_atomic
 from lano3dp.video import write_video
 
 DEFAULT_EVAL_SEED = 1_000_000
@@ -565,14 +565,12 @@ class EpisodeLog:
 
     def _start(self) -> None:
         header = {"format": EPISODE_LOG_FORMAT, "evaluation": self.identity}
-        temporary = self.path.with_name(self.path.name + ".tmp")
-        temporary.write_text(json.dumps(header) + "\n")
-        os.replace(temporary, self.path)
+        write_text_atomic(self.path, json.dumps(header) + "\n")
         self.records = {}
 
     def append(self, index: int, record: dict[str, Any]) -> dict[str, Any]:
         """Write one finished episode; returns it as read back (JSON types), as every summary sees it."""
-        record = json.loads(json.dumps(_jsonable(record)))
+        record = json.loads(json.dumps(to_jsonable(record)))
         with open(self.path, "a") as handle:
             handle.write(json.dumps({"index": index, "episode": record}) + "\n")
             handle.flush()
@@ -587,7 +585,7 @@ def evaluation_identity(config: EvalConfig, checkpoint: Path) -> dict[str, Any]:
 
     from lano3dp.policy.modeling import CHECKSUM_KEY, WEIGHTS_NAME
 
-    wanted = json.loads(json.dumps(_jsonable(asdict(config))))
+    wanted = json.loads(json.dumps(to_jsonable(asdict(config))))
     for name in EVAL_FIELDS_NOT_MEASURED:
         wanted.pop(name, None)
     weights = checkpoint / WEIGHTS_NAME
@@ -720,30 +718,6 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
     if config.out:
         write_json(config.out, result)
     return result
-
-
-def write_json(path: str | Path, data: Any) -> Path:
-    """Write JSON atomically (temporary file + rename), converting numpy scalars and non-finite floats."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(json.dumps(_jsonable(data), indent=2) + "\n")
-    os.replace(temporary, path)
-    return path
-
-
-def _jsonable(value):
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
 
 
 # ---- one instruction, end to end -----------------------------------------------------------------

@@ -116,7 +116,8 @@ def _run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float,
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from lano3dp.evaluate import EvalConfig, write_json
+    from lano3dp.evaluate import EvalConfig
+    from lano3dp.jsonio import write_json
     from lano3dp.pipeline import collect_stage, eval_stage, train_stage
 
     out = Path(out)

@@ -12,7 +12,6 @@ written, are invisible to readers and are overwritten by the next append.
 
 from __future__ import annotations
 
-import json
 import platform
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -21,6 +20,7 @@ import numpy as np
 import zarr
 
 from lano3dp.errors import CorruptFileError, Lano3dpError
+from lano3dp.jsonio import to_jsonable
 
 FORMAT_NAME = "lano3dp-episodes"
 FORMAT_VERSION = 1
@@ -44,10 +44,6 @@ def library_versions() -> dict[str, str]:
         except md.PackageNotFoundError:
             pass
     return versions
-
-
-def _to_jsonable(value):
-    return json.loads(json.dumps(value, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
 
 
 class EpisodeStore:
@@ -74,7 +70,7 @@ class EpisodeStore:
         meta = root.create_group("meta")
         meta.create_array("episode_ends", shape=(0,), chunks=(4096,), dtype="int64", fill_value=_UNCOMMITTED_END)
         root.attrs.update(
-            _to_jsonable(
+            to_jsonable(
                 {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, "versions": library_versions()}
                 | dict(attrs or {})
             )
@@ -107,9 +103,9 @@ class EpisodeStore:
             return cls.create(path, attrs)
         store = cls.open(path, mode="r+")
         for key in ("skill", "object_names"):
-            if attrs and key in attrs and key in store.attrs and store.attrs[key] != _to_jsonable(attrs[key]):
+            if attrs and key in attrs and key in store.attrs and store.attrs[key] != to_jsonable(attrs[key]):
                 raise DatasetSchemaError(
-                    f"{path} holds {key}={store.attrs[key]!r}, but {_to_jsonable(attrs[key])!r} was asked for"
+                    f"{path} holds {key}={store.attrs[key]!r}, but {to_jsonable(attrs[key])!r} was asked for"
                 )
         return store
 
@@ -159,7 +155,7 @@ class EpisodeStore:
         return dict(self._root.attrs)
 
     def update_attrs(self, **attrs) -> None:
-        self._root.attrs.update(_to_jsonable(attrs))
+        self._root.attrs.update(to_jsonable(attrs))
 
     @property
     def keys(self) -> list[str]:

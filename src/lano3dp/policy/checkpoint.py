@@ -28,6 +28,7 @@ import torch
 from torch import nn
 
 from lano3dp.errors import CorruptFileError
+from lano3dp.jsonio import to_jsonable
 from lano3dp.policy.modeling import load_safetensors, save_safetensors
 
 STATE_TENSORS = "training_state.safetensors"
@@ -123,15 +124,7 @@ def save_training_state(directory: Path, *, step: int, model: nn.Module, optimiz
     save_safetensors(tensors, directory / STATE_TENSORS, metadata={"format": "lano3dp-training-state"})
     meta = {"step": step, "optimizer": optimizer_meta, "lr_scheduler": lr_scheduler.state_dict(),
             "ema": ema.state() if ema is not None else None, "extra": extra or {}}
-    (directory / STATE_JSON).write_text(json.dumps(meta, indent=2, default=_jsonable))
-
-
-def _jsonable(value):
-    if torch.is_tensor(value):
-        return value.tolist()
-    if isinstance(value, tuple | set):
-        return list(value)
-    raise TypeError(f"cannot save {type(value).__name__} in a training state")
+    (directory / STATE_JSON).write_text(json.dumps(to_jsonable(meta, finite=False), indent=2))
 
 
 def load_training_state(directory: str | Path) -> TrainingState:

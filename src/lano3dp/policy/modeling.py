@@ -23,6 +23,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from lano3dp.errors import CorruptFileError, IncompatibleFormatError
+from lano3dp.jsonio import write_text_atomic
 from lano3dp.policy.config import PolicyConfig
 from lano3dp.policy.encoders import ObservationEncoder
 from lano3dp.policy.normalizer import LinearNormalizer
@@ -362,8 +363,8 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
         save_safetensors(state, directory / WEIGHTS_NAME, metadata=metadata)
         stats = {key: {name: value.tolist() for name, value in item.items()}
                  for key, item in self.normalizer_stats().items()}
-        _write_text(directory / NORMALIZER_NAME, json.dumps(stats, indent=2))
-        _write_text(directory / CONFIG_NAME, self.config.to_json() + "\n")
+        write_text_atomic(directory / NORMALIZER_NAME, json.dumps(stats, indent=2))
+        write_text_atomic(directory / CONFIG_NAME, self.config.to_json() + "\n")
         return directory
 
     @classmethod
@@ -403,12 +404,6 @@ def relative_action_rows(actions: list[np.ndarray], states: list[np.ndarray], n_
         windows[..., :3] -= episode_states[:, None, :3]
         rows.append(windows.reshape(-1, windows.shape[-1]))
     return np.concatenate(rows, axis=0)
-
-
-def _write_text(path: Path, text: str) -> None:
-    temporary = path.with_name(path.name + ".tmp")
-    temporary.write_text(text)
-    os.replace(temporary, path)
 
 
 def resolve_checkpoint(directory: str | Path) -> Path:

@@ -12,7 +12,7 @@ from safetensors import safe_open
 from typer.testing import CliRunner
 
 from lano3dp.cli import app
-from lano3dp.evaluate import EpisodeRunner, EvalConfig, PolicyTaskMismatchError, dataset_settings
+from lano3dp.evaluate import EpisodeRunner, EvalConfig, PolicyTaskMismatchError, dataset_settings, evaluate
 from lano3dp.policy import DiffusionPolicy, pretrained
 from lano3dp.policy.pretrained import PackagedCheckpointNotFoundError, export_fp16, packaged_checkpoint
 
@@ -31,21 +31,36 @@ def moved_checkpoint(tmp_path_factory):
             crop_high=(0.9, 0.5, 0.5))
     policy = policy_config_for_dataset(data, down_dims=(16, 32), point_hidden_dims=(16,), encoder_out=16,
                                        state_feature_dim=16, diffusion_step_embed_dim=16, n_groups=4)
-    checkpoint = train(TrainConfig(data=str(data), out=str(root / "run"), policy=policy, steps=4, batch_size=8,
-                                   warmup_steps=1, val_ratio=0.0, progress=False))
+    trained = train(TrainConfig(data=str(data), out=str(root / "run"), policy=policy, steps=4, batch_size=8,
+                                 warmup_steps=1, val_ratio=0.0, progress=False))
+    before = evaluate(EvalConfig(checkpoint=str(trained), task="bowl_pour", episodes=2, max_steps=12))
+    checkpoint = root / "copied"  # a new folder; the run and the dataset are then gone
+    shutil.copytree(trained, checkpoint)
+    shutil.rmtree(root / "run")
     shutil.rmtree(data)
-    return root, checkpoint
+    return root, checkpoint, before
+
+
+def episodes_without_timing(result: dict) -> list[dict]:
+    return [{key: value for key, value in episode.items() if "latency" not in key and not key.endswith("_s")}
+            for episode in result["episodes"]]
+
+
+def test_a_copied_checkpoint_without_its_dataset_evaluates_exactly_as_before(moved_checkpoint):
+    _, checkpoint, before = moved_checkpoint
+    after = evaluate(EvalConfig(checkpoint=str(checkpoint), task="bowl_pour", episodes=2, max_steps=12))
+    assert episodes_without_timing(after) == episodes_without_timing(before)
 
 
 def test_a_checkpoint_keeps_its_observation_settings_when_the_dataset_is_gone(moved_checkpoint):
-    _, checkpoint = moved_checkpoint
+    _, checkpoint, _ = moved_checkpoint
     settings = dataset_settings(checkpoint)
     assert settings.task == "bowl_pour" and settings.image_size == 48 and settings.n_points == 32
     assert settings.crop_low == (0.0, -0.5, 0.01) and settings.crop_high == (0.9, 0.5, 0.5)
 
 
 def test_a_checkpoint_refuses_a_task_of_another_skill(moved_checkpoint):
-    _, checkpoint = moved_checkpoint
+    _, checkpoint, _ = moved_checkpoint
     with pytest.raises(PolicyTaskMismatchError, match="trained for skill 'bowl_pour'.*not 'open_drawer'"):
         EpisodeRunner(EvalConfig(checkpoint=str(checkpoint), task="open_drawer", episodes=1))
     result = CliRunner().invoke(app, ["eval", "--checkpoint", str(checkpoint), "--task", "open_drawer",
@@ -55,7 +70,7 @@ def test_a_checkpoint_refuses_a_task_of_another_skill(moved_checkpoint):
 
 
 def test_fp16_export_halves_the_weights_and_keeps_the_statistics_exact(moved_checkpoint, tmp_path):
-    root, checkpoint = moved_checkpoint
+    root, checkpoint, _ = moved_checkpoint
     out = export_fp16(checkpoint, tmp_path / "bowl_pour", record={"success_rate": 0.0})
     with safe_open(str(out / "model.safetensors"), "pt") as weights:
         dtypes = {name: weights.get_slice(name).get_dtype() for name in weights.keys()}
@@ -75,7 +90,7 @@ def test_fp16_export_halves_the_weights_and_keeps_the_statistics_exact(moved_che
 
 
 def test_eval_finds_the_packaged_policy_by_task_name(moved_checkpoint, tmp_path, monkeypatch):
-    root, checkpoint = moved_checkpoint
+    root, checkpoint, _ = moved_checkpoint
     monkeypatch.setattr(pretrained, "PACKAGED_ROOT", tmp_path / "checkpoints")
     export_fp16(checkpoint, tmp_path / "checkpoints" / "bowl_pour")
     assert packaged_checkpoint("bowl_pour") == tmp_path / "checkpoints" / "bowl_pour"

@@ -1,4 +1,5 @@
-"""The demo's training warnings say what a budget stop means now that the learning rate follows the budget."""
+"""The demo's report: its training warnings say what a budget stop means (the learning rate follows the budget),
+and its text names the guidance the guided condition ran."""
 
 import json
 
@@ -25,3 +26,13 @@ def test_a_short_run_is_called_under_trained_and_a_full_one_gets_no_warning(tmp_
     assert any("under-trained: 3000 steps" in w for w in training_warnings(config, _checkpoint(tmp_path, 3000, 1.0)))
     config = {"steps": 5000, "policy": {"extra": {"task": "put_item_in_drawer"}}}
     assert training_warnings(config, _checkpoint(tmp_path, 5000, 1.0)) == []
+
+
+def test_the_report_describes_the_guidance_the_demo_ran():
+    from lano3dp.cli.demo_cmd import describe_guidance
+    from lano3dp.guidance.settings import GUIDANCE_PRESETS
+
+    paper = describe_guidance(GUIDANCE_PRESETS["paper"])
+    assert "normalised action units" in paper and "S = 10" in paper and "on the waypoints" in paper
+    recommended = describe_guidance(GUIDANCE_PRESETS["recommended"])
+    assert "in metres" in recommended and "densified" in recommended and "hand's present position" in recommended

@@ -187,6 +187,7 @@ def _bad_invocations(tmp: Path, checkpoint: Path, data: Path) -> list[tuple[list
         (["run", "open the drawer", "--guidance", "bogus"], 2, "'bogus' is not one of"),
         (["run", "open the drawer", "--out", str(a_file)], 2, "is a file; give a folder"),
         (["demo", "--task", "nope", "--out", str(tmp / "demo")], 2, "unknown task 'nope'"),
+        (["demo", "--guidance-preset", "fast", "--out", str(tmp / "demo")], 2, "'fast' is not one of"),
         (["guidance-figures", "--analytic", "--obstacle", "0", "0", "0.1", "--out", str(tmp / "g"), "--scheduler",
           "bogus"], 2, "'bogus' is not one of ddpm, ddim"),
         (["plan", "open the drawer", "--registry", str(tmp / "missing.json")], 1, "missing.json"),

@@ -176,7 +176,7 @@ def _preset_values(name: str) -> str:
 # Guidance options default to None: the value of --guidance-preset, which a given option overrides.
 GUIDANCE_PRESET = typer.Option(
     "recommended", "--guidance-preset",
-    help="Settings --guidance uses, each overridable by its option below: recommended (A_0|k on every DDIM step, "
+    help="Settings of guided episodes, each overridable by its option below: recommended (A_0|k on every DDIM step, "
          "metric push, path densified) | paper (S = 10, push in normalised units, waypoints only; with --scheduler "
          "ddpm --steps 100 --body sphere, the paper's whole form).")
 RHO = typer.Option(None, "--rho", help="Guidance scale rho: metres per guided step with --metric-push, else "

@@ -18,9 +18,8 @@ from pathlib import Path
 
 import typer
 
-from lano3dp.guidance.settings import GUIDANCE_PRESETS, SAFETY_MARGIN
-
-RECOMMENDED = GUIDANCE_PRESETS["recommended"]  # the guided condition's settings, rho and S overridable
+from lano3dp.cli._options import GUIDANCE_PRESET, LAST_STEPS, RHO
+from lano3dp.guidance.settings import SAFETY_MARGIN, GuidanceSettings
 
 
 def register(app: typer.Typer) -> None:
@@ -39,9 +38,9 @@ def demo_command(
                                             "sizes the LR schedule)."),
     steps: int = typer.Option(None, min=1, help="Train exactly this many steps instead of a time budget."),
     episodes: int = typer.Option(20, min=1, help="Evaluation episodes per condition."),
-    rho: float = typer.Option(RECOMMENDED.rho, help="Guidance scale rho (metres per guided step: isotropic push)."),
-    last_steps: int = typer.Option(RECOMMENDED.last_steps, help="Guide while the training-scale step k <= S "
-                                                                "(100: all)."),
+    guidance_preset: str = GUIDANCE_PRESET,
+    rho: float = RHO,
+    last_steps: int = LAST_STEPS,
     points: int = typer.Option(64, min=16, help="Points per object cloud (the policy default: a training step "
                                                 "costs a quarter of 128 points' with the rest of the recipe; "
                                                 "bench/bench_policy.py)."),
@@ -58,10 +57,10 @@ def demo_command(
     _options.output_path(out, folder=True)
     if minutes <= 0:
         raise typer.BadParameter(f"must be > 0, got {minutes}", param_hint="--minutes")
+    guided = _options.guidance_settings("clean", guidance_preset, rho=rho, last_steps=last_steps)
     console = Console()
     report = run_demo(command=command_line(ctx), out=out, task=task, demos=demos, minutes=minutes, steps=steps,
-                      episodes=episodes, rho=rho, last_steps=last_steps, points=points, workers=workers, seed=seed,
-                      console=console)
+                      episodes=episodes, guided=guided, points=points, workers=workers, seed=seed, console=console)
     console.print(f"[bold green]report:[/bold green] {report}")
 
 
@@ -111,7 +110,7 @@ def run_demo(*, out: Path, **options) -> Path:
 
 
 def _run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, steps: int | None, episodes: int,
-              rho: float, last_steps: int, points: int, workers: int, seed: int, console) -> Path:
+              guided: GuidanceSettings, points: int, workers: int, seed: int, console) -> Path:
     from dataclasses import replace
 
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -160,7 +159,7 @@ def _run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float,
     for name, variation, guidance in CONDITIONS:
         slug = name.replace(", ", "_").replace(" ", "_")
         config = EvalConfig(checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
-                            guidance=replace(RECOMMENDED, mode=guidance, rho=rho, last_steps=last_steps),
+                            guidance=replace(guided, mode=guidance),
                             workers=workers,
                             video_dir=str(out / "videos" / slug) if variation == "obstacle" else None, n_videos=1,
                             out=str(out / "eval" / f"{slug}.json"))
@@ -185,13 +184,28 @@ def _run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float,
     timings.pop("total_this_run_s", None)  # (written by earlier versions) stage times are what add up
     write_json(timings_path, timings)
     report = write_demo_report(out, task=task, checkpoint=Path(checkpoint), results=results, timings=timings,
-                               command=command, rho=rho, last_steps=last_steps)
+                               command=command, guided=guided)
     log(f"done in {time.perf_counter() - started:.0f} s")
     return report
 
 
+def describe_guidance(settings: GuidanceSettings) -> str:
+    """The guided condition's settings in words, for the report."""
+    push = ("m per guided step, pushed isotropically in metres" if settings.metric_gradient
+            else "pushed in normalised action units, as the paper")
+    words = [f"rho = {settings.rho:g} {push}", f"S = {settings.last_steps}",
+             "on the densified path" if settings.densify > 1 else "on the waypoints"]
+    if settings.anchored:
+        words.append("from the hand's present position")
+    if settings.repair_steps:
+        words.append(f"up to {settings.repair_steps} repair steps after sampling")
+    if settings.checked:
+        words.append("checked execution")
+    return ", ".join(words)
+
+
 def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, timings: dict, command: str,
-                      rho: float, last_steps: int) -> Path:
+                      guided: GuidanceSettings) -> Path:
     """report.md + rates.png + top_view.png from the evaluation results."""
     from safetensors import safe_open
 
@@ -225,8 +239,8 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
                title=f"{task}: {store.n_episodes} demos, {steps_done} training steps")
 
     # one paired scene (same seed) with and without guidance: prefer one where guidance changed the outcome
-    plain, guided = results["obstacle, no guidance"]["episodes"], results["obstacle, guidance"]["episodes"]
-    pairs = list(zip(plain, guided, strict=True))
+    unguided_runs, guided_runs = results["obstacle, no guidance"]["episodes"], results["obstacle, guidance"]["episodes"]
+    pairs = list(zip(unguided_runs, guided_runs, strict=True))
     pick = next((p for p in pairs if p[0]["collided"] and not p[1]["collided"]), pairs[0])
     runs = [(f"no guidance (seed {pick[0]['seed']}): " + ("collided" if pick[0]["collided"] else "no contact"),
              pick[0]["ee_path"]),
@@ -246,9 +260,9 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         "A small Lan-o3dp policy (object clouds of the task's objects + robot state -> diffusion over EE actions) "
         f"trained on **{store.n_episodes} scripted demonstrations** of clean scenes, then run in closed loop on new "
         "scenes: clean ones, and ones with a **novel obstacle** on the expert's path (never seen in training), "
-        f"without and with the paper's cost guidance on A_0|k (rho = {rho:g} m per guided step with the isotropic "
-        f"metric push on the densified path, S = {last_steps}; the obstacle is segmented and fitted with a vertical "
-        f"cylinder, which the hand and the carried object are kept {100 * SAFETY_MARGIN:g} cm clear of).",
+        f"without and with the paper's cost guidance on A_0|k ({describe_guidance(guided)}; the obstacle is "
+        "segmented and fitted with a vertical cylinder, which the hand and the carried object are kept "
+        f"{100 * SAFETY_MARGIN:g} cm clear of).",
         "",
         f"Policy: {parameters / 1e6:.2f} M parameters, UNet {tuple(policy_config.down_dims)}, "
         f"{policy_config.n_points} points per object, obs {policy_config.n_obs_steps} steps, horizon "

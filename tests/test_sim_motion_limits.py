@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lano3dp.geometry.rotations import quat_to_matrix
 from lano3dp.sim import TabletopEnv
 from lano3dp.sim.env import MotionLimits
 from lano3dp.sim.experts import rotation_angle
-from lano3dp.sim.robot import quat_to_mat
 from lano3dp.sim.tasks import TASKS
 
 LIMITS = MotionLimits()
@@ -29,7 +29,7 @@ def test_no_action_sequence_moves_the_hand_faster_than_the_limits(seed):
     env = TabletopEnv("close_microwave", image_size=16, render_rgb=False)
     try:
         env.reset(seed=seed)
-        previous_target = env._target_pos.copy(), quat_to_mat(env._target_quat)
+        previous_target = env._target_pos.copy(), quat_to_matrix(env._target_quat)
         previous_hand = env.gripper.ee_pose(env.data)
         limited = 0
         for _ in range(30):
@@ -37,7 +37,7 @@ def test_no_action_sequence_moves_the_hand_faster_than_the_limits(seed):
             action = random_action(rng) if rng.random() < 0.7 else np.concatenate(
                 [previous_target[0] + rng.normal(scale=0.01, size=3), previous_target[1][:, :2].T.reshape(-1), [0]])
             *_, info = env.step(action)
-            target = env._target_pos.copy(), quat_to_mat(env._target_quat)
+            target = env._target_pos.copy(), quat_to_matrix(env._target_quat)
             hand = env.gripper.ee_pose(env.data)
             assert np.linalg.norm(target[0] - previous_target[0]) <= STEP_DISTANCE + 1e-9
             assert rotation_angle(previous_target[1], target[1]) <= STEP_ANGLE + 1e-6

@@ -21,8 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lano3dp.geometry.rotations import matrix_to_rot6d, slerp
-from lano3dp.sim.robot import mat_to_quat, quat_to_mat
+from lano3dp.geometry.rotations import matrix_to_quat, matrix_to_rot6d, quat_to_matrix, slerp
 
 CONTROL_HZ = 10.0
 OPEN, CLOSED = 0.0, 1.0
@@ -101,12 +100,12 @@ class MotionPlan:
         rows = []
         previous = self.start
         for segment in self.segments:
-            q0, q1 = mat_to_quat(previous.rotation), mat_to_quat(segment.rotation)
+            q0, q1 = matrix_to_quat(previous.rotation), matrix_to_quat(segment.rotation)
             for k in range(1, segment.steps + 1):
                 u = k / segment.steps
                 s = u * u * (3 - 2 * u)
                 position = previous.position + s * (segment.position - previous.position)
-                rotation = quat_to_mat(slerp(q0, q1, s))
+                rotation = quat_to_matrix(slerp(q0, q1, s))
                 rows.append(np.concatenate([position, matrix_to_rot6d(rotation), [segment.gripper]]))
             previous = segment
         return np.asarray(rows, dtype=np.float32)

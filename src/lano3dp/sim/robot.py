@@ -48,20 +48,6 @@ def rot_axis(axis, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
 
 
-def quat_to_mat(quat) -> np.ndarray:
-    """(w, x, y, z) -> (3, 3)."""
-    matrix = np.zeros(9)
-    mujoco.mju_quat2Mat(matrix, np.asarray(quat, dtype=np.float64) / np.linalg.norm(quat))
-    return matrix.reshape(3, 3)
-
-
-def mat_to_quat(rotation) -> np.ndarray:
-    """(3, 3) -> (w, x, y, z)."""
-    quat = np.zeros(4)
-    mujoco.mju_mat2Quat(quat, np.asarray(rotation, dtype=np.float64).reshape(-1))
-    return quat
-
-
 def top_down(yaw: float = 0.0) -> np.ndarray:
     """EE rotation of a top-down grasp whose finger axis is the world y axis rotated by `yaw`."""
     return rot_z(yaw) @ TOP_DOWN

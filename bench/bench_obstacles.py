@@ -49,7 +49,7 @@ ROOT = Path(__file__).resolve().parent.parent
 # EvalConfig fields of each sampler; a guidance mode alone is the recommended preset in that mode
 SAMPLERS = {
     "none": {"guidance": "none"},
-    "A_k": {"guidance": {"mode": "noisy", "anchored": False, "repair_steps": 0}},
+    "A_k": {"guidance": {"mode": "noisy", "anchored": False, "repair_steps": 0, "hold_unclear": False}},
     "paper": {"guidance": asdict(GUIDANCE_PRESETS["paper"]), "scheduler": "ddpm", "steps": 100,
               "obstacle": {"body": "sphere"}},
     "default": {"guidance": "clean"},

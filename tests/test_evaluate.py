@@ -129,6 +129,18 @@ def test_guided_results_saved_before_the_anchored_path_and_the_repair_are_not_ta
     assert cached_eval(replace(today, guidance=replace(today.guidance, anchored=False, repair_steps=0))) is not None
 
 
+def test_results_saved_before_the_cut_to_the_clear_start_are_not_taken_for_todays(tmp_path):
+    out = tmp_path / "guided.json"
+    today = EvalConfig(checkpoint="run", task="bowl_pour", variation="obstacle", episodes=3,
+                       guidance=GUIDANCE_PRESETS["recommended"], out=str(out))
+    before = json.loads(json.dumps(asdict(today)))
+    before["guidance"].pop("hold_unclear")  # results/obstacles_anchored*.json were saved so
+    write_json(out, {"config": before, "summary": {"success_rate": 0.5}})
+    assert EvalConfig.from_dict(before).guidance.hold_unclear is False
+    assert cached_eval(today) is None
+    assert cached_eval(replace(today, guidance=replace(today.guidance, hold_unclear=False))) is not None
+
+
 def test_write_json_is_atomic_and_handles_numpy_and_infinity(tmp_path):
     path = write_json(tmp_path / "a" / "r.json", {"x": np.float32(1.5), "y": np.arange(2), "z": float("inf")})
     assert json.loads(path.read_text()) == {"x": 1.5, "y": [0, 1], "z": None}

@@ -327,7 +327,7 @@ def test_a_chunk_guidance_left_inside_the_margin_is_pushed_clear_after_sampling(
     weak = GuidanceConfig(mode="clean", scale=1e-6, last_steps=10)
     results = {}
     for repair_steps in (0, 20):
-        config = RuntimeConfig(guidance=weak, obstacle=model, repair_steps=repair_steps)
+        config = RuntimeConfig(guidance=weak, obstacle=model, repair_steps=repair_steps, hold_unclear=False)
         runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
         results[repair_steps] = (rollout(env, runner, seed=0), runner.chunks)
     unrepaired, chunks = results[0]
@@ -337,6 +337,23 @@ def test_a_chunk_guidance_left_inside_the_margin_is_pushed_clear_after_sampling(
     # the simulator's own contact test: the pushed path clears, and each chunk was predicted to
     assert not repaired.collided and repaired.min_clearance > 0
     assert min(repaired.chunk_predicted_clearance) >= 0
+
+
+def test_a_chunk_predicted_to_collide_runs_only_its_clear_start_and_the_hand_holds_short(observer):
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
+    weak = GuidanceConfig(mode="clean", scale=1e-6, last_steps=10)  # leaves the straight line through it
+    config = RuntimeConfig(guidance=weak, obstacle=model, repair_steps=0, hold_unclear=True)
+    runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
+    result = rollout(env, runner, seed=0)
+    assert not result.collided and result.min_clearance > 0
+    cut = [c.executed for c in runner.chunks if c.executed is not None]
+    assert cut and 0 in cut  # cut short, then held still where every way on comes too close
+    assert not result.success  # the pan is beyond the obstacle: a hand that stops short never gets there
+    unguided = RuntimeConfig(obstacle=model, repair_steps=0, hold_unclear=True)
+    plain = PolicyRunner(FakePolicy(), observer, unguided, obstacle_phrases=["obstacle_0"])
+    assert rollout(env, plain, seed=0).collided  # only guided chunks are checked: unguided runs stay the baseline
+    assert all(c.executed is None for c in plain.chunks)
 
 
 def test_checked_execution_resamples_with_guidance_until_the_chunk_is_clear(observer):

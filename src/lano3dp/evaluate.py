@@ -268,13 +268,13 @@ def check_task_matches_policy(task: str, policy_config) -> None:
             f"{policy_config.extra.get('task') or trained_skill}")
 
 
-def runtime_config(config: EvalConfig, seed: int):
-    """The runner's config for one episode of this evaluation."""
+def runtime_config(config: EvalConfig, seed: int, step_limit: float | None = None):
+    """The runner's config for one episode of this evaluation (`step_limit`: the env's `max_ee_step`)."""
     from lano3dp.runtime import RuntimeConfig
 
     return RuntimeConfig.from_settings(config.guidance, config.obstacle, scheduler=config.scheduler,
                                        num_inference_steps=config.steps, n_action_steps=config.n_action_steps,
-                                       seed=seed)
+                                       step_limit=step_limit, seed=seed)
 
 
 # ---- one process: policy + env + episodes ---------------------------------------------------------
@@ -310,7 +310,8 @@ class EpisodeRunner:
         from lano3dp.runtime import PolicyRunner, rollout, scene_obstacles
 
         config = self.config
-        runner = (self.runner_class or PolicyRunner)(self.policy, self.observer, runtime_config(config, seed))
+        runner = (self.runner_class or PolicyRunner)(self.policy, self.observer, runtime_config(
+            config, seed, step_limit=getattr(self.env, "max_ee_step", None)))
         slots = tuple(self.policy.config.object_names)
         carried = carried_slot_word(self.task)
 
@@ -476,7 +477,7 @@ FLAT_EVAL_FIELDS = {
 # What flat results saved before a field existed were made with, where that is not the field's default.
 EVAL_FIELDS_BEFORE = {"body": "sphere"}
 # ... and the same for fields added to a settings section (every guided result before them ran without).
-SECTION_FIELDS_BEFORE = {"guidance": {"anchored": False, "repair_steps": 0}}
+SECTION_FIELDS_BEFORE = {"guidance": {"anchored": False, "repair_steps": 0, "hold_unclear": False}}
 EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
 
 
@@ -873,7 +874,8 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     episodes, paths = {}, []
     for label, mode in conditions:
         runtime = RuntimeConfig.from_settings(replace(config.guidance, mode=mode), config.obstacle,
-                                              scheduler=config.scheduler, num_inference_steps=config.steps, seed=seed)
+                                              scheduler=config.scheduler, num_inference_steps=config.steps,
+                                              step_limit=getattr(env, "max_ee_step", None), seed=seed)
         runner = PolicyRunner(policy, observer, runtime, target_phrases=targets, obstacle_phrases=obstacles,
                               held_object=held)
         frames: list[np.ndarray] = []

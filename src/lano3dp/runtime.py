@@ -43,13 +43,14 @@ import torch
 
 from lano3dp.errors import EmptyCloudError, Lano3dpError
 from lano3dp.geometry.frame import RGBDFrame, observe
-from lano3dp.geometry.rotations import quat_to_rot6d, rot6d_to_quat, slerp
+from lano3dp.geometry.rotations import quat_to_rot6d, rot6d_to_matrix, rot6d_to_quat, slerp
 from lano3dp.guidance.checked import CheckConfig, checked_sample
 from lano3dp.guidance.costs import (
-    MetricGradient,
+    ExecutedPath,
     ObstacleSet,
     PositionCost,
     body_reach,
+    clear_prefix,
     obstacle_guidance_cost,
     push_clear,
 )
@@ -101,8 +102,14 @@ class RuntimeConfig:
         guide_when_needed: sample the policy's own chunk first and guide only when its horizon comes closer
             than the margin to an obstacle (one extra unguided sample per chunk near obstacles; beyond the paper).
         anchored: the cost sees the path from the EE's present position (`guidance.AnchoredPath`).
-        repair_steps: after a guided sample, at most this many 1 cm steps of plain cost descent until the chunk
-            clears the obstacles by half the margin (`guidance.push_clear`; 0: off).
+        repair_steps: after a guided sample, at most this many 1 cm steps of plain cost descent until the path the
+            arm will take through the chunk clears the obstacles by the margin (`guidance.push_clear` on
+            `guidance.ExecutedPath`; 0: off).
+        hold_unclear: after the repair, execute only the start of the chunk predicted to clear the obstacles by
+            half the margin, and hold still when none does (`guidance.clear_prefix`); the next chunk re-plans.
+        step_limit: metres the end effector moves at most per env step, which the executed path is predicted
+            under (the built-in simulator's `max_ee_step`, filled in by evaluation and `run`; None: every
+            waypoint is assumed reached).
         seed: seeds the sampling noise (one torch.Generator per runner, re-seeded on reset).
     """
 
@@ -119,6 +126,8 @@ class RuntimeConfig:
     guide_when_needed: bool = _RECOMMENDED.guide_when_needed
     anchored: bool = _RECOMMENDED.anchored
     repair_steps: int = _RECOMMENDED.repair_steps
+    hold_unclear: bool = _RECOMMENDED.hold_unclear
+    step_limit: float | None = None
     seed: int = 0
 
     def __post_init__(self):
@@ -138,8 +147,10 @@ class RuntimeConfig:
     @classmethod
     def from_settings(cls, guidance: GuidanceSettings, obstacle: ObstacleSettings | None = None, *,
                       scheduler: str | None = None, num_inference_steps: int | None = None,
-                      n_action_steps: int | None = None, seed: int = 0) -> RuntimeConfig:
-        """The runner's config for a user's guidance and obstacle settings (as `lano3dp eval` and `run` build it)."""
+                      n_action_steps: int | None = None, step_limit: float | None = None,
+                      seed: int = 0) -> RuntimeConfig:
+        """The runner's config for a user's guidance and obstacle settings (as `lano3dp eval` and `run` build it);
+        `step_limit` is the env's `max_ee_step` where it has one."""
         obstacle = obstacle or ObstacleSettings()
         sampler = None if not guidance.guided else GuidanceConfig(
             mode=guidance.mode, scale=guidance.rho, last_steps=guidance.last_steps,
@@ -154,7 +165,8 @@ class RuntimeConfig:
                                           held_radius=obstacle.held_radius, refit_every_chunk=obstacle.refit),
                    checked=checked, metric_gradient=guidance.metric_gradient, densify=guidance.densify,
                    guide_when_needed=guidance.guide_when_needed, anchored=guidance.anchored,
-                   repair_steps=guidance.repair_steps, seed=seed)
+                   repair_steps=guidance.repair_steps, hold_unclear=guidance.hold_unclear,
+                   step_limit=step_limit, seed=seed)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
@@ -178,6 +190,8 @@ class ChunkRecord:
             runner sees them (None without obstacles).
         clear: False when checked execution found no collision-free try.
         repaired: plain cost-descent steps taken on the sample afterwards (`RuntimeConfig.repair_steps`).
+        executed: actions kept when the runner cut the chunk short to what it predicts clear (0: it held still;
+            `RuntimeConfig.hold_unclear`); None: the whole chunk ran.
         trajectory: (H, 10) the whole sampled horizon (metric).
     """
 
@@ -189,6 +203,7 @@ class ChunkRecord:
     predicted_clearance: float | None = None
     clear: bool = True
     repaired: int = 0
+    executed: int | None = None
     trajectory: np.ndarray | None = None
 
 
@@ -497,14 +512,25 @@ class PolicyRunner:
             if chunk is None:
                 chunk = sample(guidance)
             record.scale = guidance.scale if guidance is not None else 0.0
-        if cost is not None and cfg.guided and cfg.repair_steps and record.scale > 0:
-            chunk, record.repaired = self.push_chunk_clear(chunk, start)
+        guided = cost is not None and cfg.guided and record.scale > 0
+        # the path the arm will take through this chunk, which the repair and the cut below are checked on
+        path_cost = self.executed_path_cost(state, chunk.trajectory[0, execute]) if guided and (
+            cfg.repair_steps or cfg.hold_unclear) else None
+        if path_cost is not None and cfg.repair_steps:
+            chunk, record.repaired = self.push_chunk_clear(chunk, start, path_cost)
         if cost is not None and (cfg.checked is None or record.repaired):
             with torch.no_grad():
                 executed = chunk.trajectory[:, execute, :3].float()
-                record.predicted_clearance = float(cost.clearance(executed).min())
+                record.predicted_clearance = float((path_cost or cost).clearance(executed).min())
         record.sample_s = time.perf_counter() - sample_started
-        chunk = ActionChunk(chunk.trajectory[:, execute], chunk.trajectory)
+        actions = chunk.trajectory[:, execute]
+        if path_cost is not None and cfg.hold_unclear:
+            actions = self.cut_to_clear(actions, state, path_cost)
+            record.executed = actions.shape[1] if actions.shape[1] < self.n_action_steps else None
+            if actions.shape[1] == 0:  # nothing of it is clear: hold the present pose, with the chunk's gripper
+                actions = chunk.trajectory[:, start:start + 1].clone()
+                actions[0, 0, :9] = torch.as_tensor(np.asarray(state[:9]), dtype=actions.dtype)
+        chunk = ActionChunk(actions, chunk.trajectory)
         record.trajectory = chunk.trajectory[0].detach().cpu().numpy().astype(np.float32)
         record.latency_s = time.perf_counter() - started
         self.chunks.append(record)
@@ -515,18 +541,52 @@ class PolicyRunner:
                                   f"{record.predicted_clearance:.3f} m")
         return chunk
 
-    def push_chunk_clear(self, chunk: ActionChunk, start: int) -> tuple[ActionChunk, int]:
-        """`chunk` with its waypoints from horizon index `start` pushed to half the margin from every obstacle by
-        plain cost descent (`guidance.push_clear`, at most `repair_steps` 1 cm steps), and the steps taken."""
-        cost = self.obstacle_cost
-        cost = cost.cost if isinstance(cost, MetricGradient) else cost  # descend in metres, every axis alike
+    def executed_path_cost(self, state: np.ndarray, waypoints: torch.Tensor) -> ExecutedPath:
+        """The cost on the path the arm will take from its present pose through `waypoints` ((T, 10) metric
+        actions): the body as the guidance cost measured it, posed by each waypoint's rotation (a held object's
+        ball turns with the hand), under the arm's step limit."""
+        rotations = [np.asarray(state[3:9], dtype=np.float64)] + list(waypoints[:, 3:9].detach().cpu().double().numpy())
+        model = self.config.obstacle
+        if model.body == "swept":
+            now = rot6d_to_matrix(rotations[0])
+            held = self._held_ball if self._held_ball is not None and state[GRASP_FLAG] >= 0.5 else None
+            poses, radii = [], None
+            for rotation in rotations:
+                offsets, radii = model.hand_balls(rotation)
+                if held is not None:  # measured in world axes now: turn it with the hand
+                    offsets = np.vstack([offsets, rot6d_to_matrix(rotation) @ now.T @ held[0]])
+                    radii = np.append(radii, held[1])
+                poses.append(offsets)
+            node_offsets = np.stack(poses)
+        else:  # the "sphere" body: the obstacles carry the held radius; one ball of radius 0 at the EE point
+            node_offsets, radii = np.zeros((len(rotations), 1, 3)), np.zeros(1)
+        step_limit = None if self.config.step_limit is None else self.config.step_limit * self.time_stride
+        return ExecutedPath(list(self.obstacles), state[:3], node_offsets, radii, step_limit=step_limit,
+                            densify=max(self.config.densify, 2), margin=model.margin)
+
+    def push_chunk_clear(self, chunk: ActionChunk, start: int, cost: PositionCost) -> tuple[ActionChunk, int]:
+        """`chunk` with its waypoints from horizon index `start` pushed to the margin from every obstacle along
+        `cost` (the executed path's, in metres) by plain descent (`guidance.push_clear`, at most `repair_steps`
+        1 cm steps), and the steps taken."""
         trajectory = chunk.trajectory.detach().clone()
-        moved, steps = push_clear(cost, trajectory[:, start:, :3].double(), clearance=self.config.obstacle.margin / 2,
+        executed = slice(start, start + len(cost.node_offsets) - 1)
+        moved, steps = push_clear(cost, trajectory[:, executed, :3].double(), clearance=self.config.obstacle.margin,
                                   iterations=self.config.repair_steps)
         if steps == 0:
             return chunk, 0
-        trajectory[:, start:, :3] = moved.to(trajectory.dtype)
+        trajectory[:, executed, :3] = moved.to(trajectory.dtype)
         return ActionChunk(trajectory[:, start:start + chunk.actions.shape[1]], trajectory), steps
+
+    def cut_to_clear(self, actions: torch.Tensor, state: np.ndarray, cost: PositionCost) -> torch.Tensor:
+        """The start of `actions` (B, T, 10) whose executed path keeps half the margin from every obstacle
+        (`guidance.clear_prefix`); the last kept action may be moved part of the way to its waypoint."""
+        start = torch.as_tensor(np.asarray(state[:3], dtype=np.float64))[None]
+        kept = clear_prefix(cost, actions[:, :, :3].double(), start, clearance=self.config.obstacle.margin / 2)
+        if kept.shape[1] == actions.shape[1]:
+            return actions
+        cut = actions[:, :kept.shape[1]].clone()
+        cut[:, :, :3] = kept.to(cut.dtype)
+        return cut
 
     def act(self, frame: RGBDFrame, state: np.ndarray) -> np.ndarray:
         """Observe, let the policy re-plan (through `plan`) when its queue is empty, and return the next (10,)
@@ -567,6 +627,8 @@ class EpisodeResult:
         chunk_latency_s: planning time of every chunk (`ChunkRecord.latency_s`), seconds.
         chunk_tries: samples drawn per chunk (checked execution).
         chunk_repaired: plain cost-descent steps taken after sampling, per chunk (`RuntimeConfig.repair_steps`).
+        chunk_executed: per chunk, the actions kept when it was cut short to its predicted-clear start (0: held
+            still), or None when it ran whole (`RuntimeConfig.hold_unclear`).
         chunk_predicted_clearance: per chunk, the runner's own clearance estimate of the executed waypoints.
         ee_path: (steps + 1, 3) EE positions, metres (kept for plots; dropped from JSON by default).
         obstacles: the fitted obstacle shapes the runner guided against (see `describe_obstacle`).
@@ -594,6 +656,7 @@ class EpisodeResult:
     ee_path: np.ndarray
     obstacles: list[dict[str, Any]] = field(default_factory=list)
     chunk_repaired: list[int] = field(default_factory=list)
+    chunk_executed: list[int | None] = field(default_factory=list)
     held_radius: float | None = None
     held_clouds: int = 0
     partly_hidden: list[str] = field(default_factory=list)
@@ -690,6 +753,7 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
         chunk_latency_s=[round(c.latency_s, 5) for c in runner.chunks],
         chunk_tries=[c.tries for c in runner.chunks],
         chunk_repaired=[c.repaired for c in runner.chunks],
+        chunk_executed=[c.executed for c in runner.chunks],
         chunk_predicted_clearance=[None if c.predicted_clearance is None else round(c.predicted_clearance, 5)
                                    for c in runner.chunks],
         ee_path=ee_path,

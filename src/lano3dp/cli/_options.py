@@ -209,8 +209,12 @@ ANCHORED = typer.Option(None, "--anchored/--no-anchored",
                              f"pushed clear too (default: {_preset_values('anchored')}).")
 REPAIR_STEPS = typer.Option(None, "--repair-steps", min=0,
                             help="After a guided sample, at most this many 1 cm steps of plain cost descent until "
-                                 "the chunk clears by half the margin (0: off; default: "
-                                 f"{_preset_values('repair_steps')}).")
+                                 "the path the arm will take through the chunk clears by the margin (0: off; "
+                                 f"default: {_preset_values('repair_steps')}).")
+HOLD_UNCLEAR = typer.Option(None, "--hold-unclear/--no-hold-unclear",
+                            help="Execute only the start of a guided chunk predicted to keep half the margin, "
+                                 "holding still when none does, and re-plan (default: "
+                                 f"{_preset_values('hold_unclear')}).")
 OBSTACLE_SHAPE = typer.Option(ObstacleSettings.shape, "--obstacle-shape", metavar="NAME", help=obstacle_shape_help())
 MARGIN = typer.Option(ObstacleSettings.margin, "--margin", min=0.0,
                       help="Safety margin (m) beyond contact, part of Q*.")
@@ -264,7 +268,7 @@ GUIDANCE_OVERRIDES = {"rho": "rho", "last_steps": "last_steps", "metric_gradient
                       "per_train_step": "per_train_step", "densify": "densify",
                       "guided_clip_range": "guided_clip_range", "push_weight": "push_weight", "checked": "checked",
                       "guide_when_needed": "guide_when_needed", "anchored": "anchored",
-                      "repair_steps": "repair_steps"}
+                      "repair_steps": "repair_steps", "hold_unclear": "hold_unclear"}
 
 
 def episode_settings(params: Mapping[str, Any]) -> tuple[GuidanceSettings, ObstacleSettings, PerceptionSettings]:

@@ -199,6 +199,8 @@ def describe_guidance(settings: GuidanceSettings) -> str:
         words.append("from the hand's present position")
     if settings.repair_steps:
         words.append(f"up to {settings.repair_steps} repair steps after sampling")
+    if settings.hold_unclear:
+        words.append("only the part of a chunk predicted clear executed")
     if settings.checked:
         words.append("checked execution")
     return ", ".join(words)

@@ -37,6 +37,7 @@ def eval_command(
     guide_when_needed: bool = _options.GUIDE_WHEN_NEEDED,
     anchored: bool = _options.ANCHORED,
     repair_steps: int = _options.REPAIR_STEPS,
+    hold_unclear: bool = _options.HOLD_UNCLEAR,
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
     obstacle_shape: str = _options.OBSTACLE_SHAPE,

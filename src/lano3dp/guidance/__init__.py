@@ -15,7 +15,8 @@ _EXPORTS = {
     "AnchoredPath": "costs", "Cylinder": "costs", "Densified": "costs", "MetricGradient": "costs", "Obstacle": "costs",
     "ObstacleSet": "costs", "OrientedBox": "costs", "PointCloudObstacle": "costs", "PositionCost": "costs",
     "Sphere": "costs", "SweptBody": "costs", "densify": "costs", "min_clearance": "costs",
-    "obstacle_guidance_cost": "costs", "push_clear": "costs", "ObstacleModel": "obstacle_model",
+    "obstacle_guidance_cost": "costs", "push_clear": "costs", "ExecutedPath": "costs", "clear_prefix": "costs",
+    "reached_positions": "costs", "ObstacleModel": "obstacle_model",
     "CollisionError": "exceptions", "GuidanceError": "exceptions",
     "fit_box": "fitting", "fit_cylinder": "fitting",
     "DenoiseStep": "sampler", "GuidanceConfig": "sampler", "GuidanceMode": "sampler", "denoise": "sampler",
@@ -27,12 +28,12 @@ _EXPORTS = {
 
 __all__ = [
     "GUIDANCE_PRESETS", "SAFETY_MARGIN", "AnchoredPath", "CheckConfig", "CheckedResult", "CollisionError",
-    "Cylinder", "DenoiseStep", "Densified", "GuidanceConfig",
+    "Cylinder", "DenoiseStep", "Densified", "ExecutedPath", "GuidanceConfig",
     "GuidanceError", "GuidanceMode", "GuidanceSettings", "MetricGradient", "Obstacle", "ObstacleSet",
     "ObstacleModel", "ObstacleSettings", "ObstacleShape", "OrientedBox",
     "PointCloudObstacle", "PositionCost", "Sphere", "SweptBody", "UnknownObstacleShapeError", "checked_sample",
     "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "min_clearance", "obstacle_guidance_cost",
-    "obstacle_shape_names", "push_clear",
+    "obstacle_shape_names", "push_clear", "clear_prefix", "reached_positions",
     "register_obstacle_shape", "unregister_obstacle_shape",
 ]
 
@@ -42,6 +43,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
         AnchoredPath,
         Cylinder,
         Densified,
+        ExecutedPath,
         MetricGradient,
         Obstacle,
         ObstacleSet,
@@ -50,10 +52,12 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
         PositionCost,
         Sphere,
         SweptBody,
+        clear_prefix,
         densify,
         min_clearance,
         obstacle_guidance_cost,
         push_clear,
+        reached_positions,
     )
     from lano3dp.guidance.exceptions import CollisionError, GuidanceError
     from lano3dp.guidance.fitting import fit_box, fit_cylinder

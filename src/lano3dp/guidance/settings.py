@@ -51,9 +51,12 @@ class GuidanceSettings:
         anchored: cost the path from the EE's present position through the waypoints, so the step from
             the hand to the first action is pushed clear too (`guidance.AnchoredPath`; the paper costs the
             horizon's waypoints alone).
-        repair_steps: after sampling, at most this many 1 cm steps of plain descent on the cost move the chunk's
-            waypoints until they clear every obstacle by half the margin (`guidance.push_clear`; 0: off, the
-            paper's): guidance pushes while the network pulls back, so a guided chunk can end inside the margin.
+        repair_steps: after sampling, at most this many 1 cm steps of plain descent move the chunk's waypoints
+            until the path the arm will take through them clears every obstacle by the margin
+            (`guidance.push_clear` on `guidance.ExecutedPath`; 0: off, the paper's): guidance pushes while the
+            network pulls back, so a guided chunk can end inside the margin.
+        hold_unclear: execute only the start of a guided chunk predicted to keep half the margin, holding still
+            when none does, and re-plan (`guidance.clear_prefix`; the paper executes every chunk whole).
     """
 
     mode: str = "clean"
@@ -68,6 +71,7 @@ class GuidanceSettings:
     guide_when_needed: bool = False
     anchored: bool = True
     repair_steps: int = 20
+    hold_unclear: bool = True
 
     def __post_init__(self):
         if self.mode not in GUIDANCE_MODES:
@@ -95,7 +99,7 @@ GUIDANCE_PRESETS: dict[str, GuidanceSettings] = {
     # between them did not). The paper also sampled with DDPM-100 and kept a ball of the held object's diameter
     # clear: add scheduler "ddpm", steps 100 and ObstacleSettings(body="sphere").
     "paper": GuidanceSettings(rho=4.0, last_steps=10, metric_gradient=False, densify=1, anchored=False,
-                              repair_steps=0),
+                              repair_steps=0, hold_unclear=False),
 }
 
 

@@ -313,6 +313,11 @@ class TabletopEnv(gym.Env):
         return obs, float(self._success), self._success, truncated, self._info(clipped, contacts, clearance,
                                                                                limited)
 
+    @property
+    def max_ee_step(self) -> float:
+        """Metres the end effector moves at most in one step (the linear motion limit over a control period)."""
+        return self.motion_limits.linear / self.control_hz
+
     def _bounded_target(self, start_pos: np.ndarray, start_quat: np.ndarray, position: np.ndarray,
                         quat: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         """The target this step reaches: `position` / `quat` (wxyz, same hemisphere as `start_quat`),

@@ -10,6 +10,10 @@ plugs in by implementing it (structural typing: no inheritance needed).
 
 Real robots without ground-truth segmentation leave `frame.segmentation` None and use an
 open-vocabulary segmenter; `info` should carry "success" when the robot can tell (else False).
+
+Optional: `max_ee_step`, the metres the end effector moves at most in one step. Guided runs then predict the
+path the arm really takes through a chunk (it chases each waypoint at that pace) when they check and repair
+the chunk; without it every waypoint is assumed reached.
 """
 
 from __future__ import annotations

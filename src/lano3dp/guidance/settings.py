@@ -28,9 +28,10 @@ BODY_MODELS = ("swept", "sphere")
 class GuidanceSettings:
     """How chunks are guided. The defaults are the recommended preset: A_0|k cost on every DDIM step (S = 100
     training steps covers all 10), an isotropic push of 4 cm per guided step on the path densified x4, every push
-    of the same weight and the scheduler's clipping, the path costed from the hand and pushed clear after
-    sampling; the closed-loop results (results/obstacles*.md) were made with these (those before
-    results/obstacles_anchored.md without the last two). The synthetic sweep (results/bench_guidance.json,
+    of the same weight and the scheduler's clipping, the path costed from the hand, pushed clear after sampling
+    along the path the arm will take, and only its predicted-clear start executed; the closed-loop results
+    (results/obstacles*.md) were made with these (those before results/obstacles_hold.md without the last, and
+    those before results/obstacles_anchored.md without the two before it). The synthetic sweep (results/bench_guidance.json,
     issue 3) has no row of them: its nearest, DDIM-10 at rho 0.04 on every step with push_weight "alpha_bar" and
     guided_clip_range 3, left 1% of sampled paths with a segment through the obstacle (2 cm: 19%).
     GUIDANCE_PRESETS["paper"] is the paper's form.

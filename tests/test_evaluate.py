@@ -141,6 +141,20 @@ def test_results_saved_before_the_cut_to_the_clear_start_are_not_taken_for_today
     assert cached_eval(replace(today, guidance=replace(today.guidance, hold_unclear=False))) is not None
 
 
+def test_unguided_results_stay_current_when_a_guidance_default_changes(tmp_path):
+    out = tmp_path / "clean.json"
+    today = EvalConfig(checkpoint="run", task="bowl_pour", episodes=3, out=str(out))  # unguided
+    made_then = json.loads(json.dumps(asdict(today)))
+    made_then["guidance"]["rho"] = 0.04  # the recommended push before it was halved: unguided, nothing read it
+    write_json(out, {"config": made_then, "summary": {"success_rate": 0.5}})
+    assert cached_eval(today) is not None
+    # checked execution escalates from rho even without guidance, so there the setting counts
+    checked = replace(today, guidance=replace(today.guidance, checked=True))
+    write_json(out, {"config": {**made_then, "guidance": {**made_then["guidance"], "checked": True}},
+                     "summary": {"success_rate": 0.5}})
+    assert cached_eval(checked) is None
+
+
 def test_write_json_is_atomic_and_handles_numpy_and_infinity(tmp_path):
     path = write_json(tmp_path / "a" / "r.json", {"x": np.float32(1.5), "y": np.arange(2), "z": float("inf")})
     assert json.loads(path.read_text()) == {"x": 1.5, "y": [0, 1], "z": None}

@@ -481,6 +481,17 @@ SECTION_FIELDS_BEFORE = {"guidance": {"anchored": False, "repair_steps": 0, "hol
 EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
 
 
+def measured_config(config: Mapping[str, Any]) -> dict[str, Any]:
+    """A nested EvalConfig dict as far as it changes the episodes: the worker count never does, and an unguided
+    evaluation without checked execution never reads the other guidance settings, so results made under other
+    guidance defaults stay current."""
+    measured = {name: value for name, value in config.items() if name not in EVAL_FIELDS_NOT_MEASURED}
+    guidance = measured.get("guidance")
+    if isinstance(guidance, Mapping) and guidance.get("mode") == "none" and not guidance.get("checked"):
+        measured["guidance"] = {"mode": "none", "checked": False}
+    return measured
+
+
 def saved_config(made: Mapping[str, Any]) -> dict[str, Any]:
     """A saved EvalConfig dict (results JSON, episode log) in today's nested form, with each measured field added
     since it was saved set to what it was made with (EVAL_FIELDS_BEFORE, SECTION_FIELDS_BEFORE, else the field's
@@ -549,7 +560,7 @@ class EpisodeLog:
             header = None
         evaluation = header.get("evaluation") if isinstance(header, dict) else None
         if isinstance(evaluation, dict) and isinstance(evaluation.get("config"), dict):
-            evaluation = {**evaluation, "config": saved_config(evaluation["config"])}
+            evaluation = {**evaluation, "config": measured_config(saved_config(evaluation["config"]))}
         if not header or header.get("format") != EPISODE_LOG_FORMAT or evaluation != self.identity:
             self._start()  # another evaluation's log (or an empty one): this evaluation starts from nothing
             return
@@ -586,9 +597,7 @@ def evaluation_identity(config: EvalConfig, checkpoint: Path) -> dict[str, Any]:
 
     from lano3dp.policy.modeling import CHECKSUM_KEY, WEIGHTS_NAME
 
-    wanted = json.loads(json.dumps(to_jsonable(asdict(config))))
-    for name in EVAL_FIELDS_NOT_MEASURED:
-        wanted.pop(name, None)
+    wanted = measured_config(json.loads(json.dumps(to_jsonable(asdict(config)))))
     weights = checkpoint / WEIGHTS_NAME
     try:
         with safe_open(str(weights), framework="pt") as handle:

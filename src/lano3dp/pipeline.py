@@ -176,18 +176,14 @@ def cached_eval(config) -> dict[str, Any] | None:
     """The results in `config.out` if they were made with this EvalConfig (up to the worker count) and the
     checkpoint's weights are not newer than them, else None. The weights matter because a folder can be
     re-written in place (a re-packaged policy keeps its path): its old results would otherwise be reused."""
-    from lano3dp.evaluate import EVAL_FIELDS_NOT_MEASURED as _EVAL_FIELDS_NOT_MEASURED
-    from lano3dp.evaluate import saved_config
+    from lano3dp.evaluate import measured_config, saved_config
 
     if config.out and Path(config.out).exists() and not _weights_newer_than(config.checkpoint, Path(config.out)):
         previous = json.loads(Path(config.out).read_text())
-        wanted = json.loads(json.dumps(asdict(config)))
+        wanted = measured_config(json.loads(json.dumps(asdict(config))))
         # results saved before a field existed were made with its default (e.g. segmenter "sim"), and flat ones
         # (saved before the settings were nested) are read into their sections
-        made = saved_config(previous.get("config") or {})
-        for name in _EVAL_FIELDS_NOT_MEASURED:
-            wanted.pop(name, None)
-            made.pop(name, None)
+        made = measured_config(saved_config(previous.get("config") or {}))
         if made == wanted:
             return previous
     return None

@@ -29,11 +29,13 @@ class GuidanceSettings:
     """How chunks are guided. The defaults are the recommended preset: A_0|k cost on every DDIM step (S = 100
     training steps covers all 10), an isotropic push of 4 cm per guided step on the path densified x4, every push
     of the same weight and the scheduler's clipping, the path costed from the hand, pushed clear after sampling
-    along the path the arm will take, and only its predicted-clear start executed; the closed-loop results
-    (results/obstacles*.md) were made with these (those before results/obstacles_hold.md without the last, and
-    those before results/obstacles_anchored.md without the two before it). The synthetic sweep (results/bench_guidance.json,
-    issue 3) has no row of them: its nearest, DDIM-10 at rho 0.04 on every step with push_weight "alpha_bar" and
-    guided_clip_range 3, left 1% of sampled paths with a segment through the obstacle (2 cm: 19%).
+    along the path the arm will take, and only its predicted-clear start executed. Closed-loop results
+    (results/obstacles*.md): results/obstacles_hold.md has these (results/obstacles_rho02.md the same with a
+    2 cm push: bowl_pour up, the drawer tasks down, more touches of a moving obstacle); those before it lack
+    the cut, and those before results/obstacles_anchored.md the anchored path and the repair too. The
+    synthetic sweep (results/bench_guidance.json, issue 3) has no row of them: its nearest, DDIM-10 at rho 0.04
+    on every step with push_weight "alpha_bar" and guided_clip_range 3, left 1% of sampled paths with a segment
+    through the obstacle (2 cm: 19%).
     GUIDANCE_PRESETS["paper"] is the paper's form.
 
     Attributes:

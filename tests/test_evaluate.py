@@ -145,7 +145,7 @@ def test_unguided_results_stay_current_when_a_guidance_default_changes(tmp_path)
     out = tmp_path / "clean.json"
     today = EvalConfig(checkpoint="run", task="bowl_pour", episodes=3, out=str(out))  # unguided
     made_then = json.loads(json.dumps(asdict(today)))
-    made_then["guidance"]["rho"] = 0.04  # the recommended push before it was halved: unguided, nothing read it
+    made_then["guidance"]["rho"] = 2 * today.guidance.rho  # made under another default: unguided, nothing read it
     write_json(out, {"config": made_then, "summary": {"success_rate": 0.5}})
     assert cached_eval(today) is not None
     # checked execution escalates from rho even without guidance, so there the setting counts

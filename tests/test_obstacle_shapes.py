@@ -288,12 +288,10 @@ def test_results_saved_before_shapes_were_named_are_described_and_drawn_as_befor
 
 
 def test_an_episode_log_from_before_the_obstacle_shape_field_still_resumes(tmp_path):
-    from lano3dp.evaluate import EVAL_FIELDS_NOT_MEASURED, EpisodeLog
+    from lano3dp.evaluate import EpisodeLog, measured_config
 
-    config = json.loads(json.dumps(asdict(EvalConfig(checkpoint="run", episodes=2))))
-    for name in EVAL_FIELDS_NOT_MEASURED:
-        config.pop(name)
-    identity = {"config": config, "checkpoint": "run", "weights": "w"}
+    config = measured_config(json.loads(json.dumps(asdict(EvalConfig(checkpoint="run", episodes=2)))))
+    identity = {"config": config, "checkpoint": "run", "weights": "w"}  # as evaluation_identity builds it
     old_obstacle = {k: v for k, v in config["obstacle"].items() if k != "shape"}
     old = {**identity, "config": {**config, "obstacle": old_obstacle}}
     path = tmp_path / "r.episodes.jsonl"

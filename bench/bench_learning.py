@@ -64,6 +64,10 @@ RECIPES = {
     # 5 degrees, 2 mm jitter, 10% point dropout), clouds, state and actions alike
     "pose_augment": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
                      "train": {"augment": {}}},
+    # ... on DART demonstrations: the phone and the broom failed at placement after reaching it, in states just off
+    # the expert's path, which DART labels with the way back
+    "pose_augment_dart": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
+                          "train": {"augment": {}}, "collect": {"dart_noise": 0.03}},
     "previous": {"points": 128, "policy": dict(action_frame="absolute", n_obs_steps=2, down_dims=(64, 128, 256),
                                                point_hidden_dims=(64, 128, 256), diffusion_step_embed_dim=128)},
 }

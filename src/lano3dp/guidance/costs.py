@@ -515,9 +515,7 @@ class ExecutedPath:
         start = self.start.to(positions).expand(batch, 1, 3)
         nodes = torch.cat([start, reached_positions(self.start, positions, self.step_limit)], 1)
         offsets = self.node_offsets[:steps + 1].to(positions)
-        fractions = torch.arange(self.densify, dtype=positions.dtype, device=positions.device) / self.densify
-        inner = nodes[:, :-1, None] + fractions[:, None] * (nodes[:, 1:, None] - nodes[:, :-1, None])
-        points = torch.cat([inner.flatten(1, 2), nodes[:, -1:]], 1)  # (B, M, 3)
+        points = densify(nodes, self.densify)  # (B, M, 3)
         both_ends = torch.cat([offsets[:-1], offsets[1:]], 1).repeat_interleave(self.densify, 0)
         both_ends = torch.cat([both_ends, offsets[-1:].repeat(1, 2, 1)], 0)  # (M, 2K, 3)
         balls = points[:, :, None] + both_ends  # (B, M, 2K, 3)
@@ -577,7 +575,7 @@ def clear_prefix(cost: PositionCost, positions: torch.Tensor, start: torch.Tenso
     _check_positions(positions)
     with torch.no_grad():
         def clear(candidate: torch.Tensor) -> bool:
-            return float(cost.clearance(candidate).min()) >= clearance
+            return float(min_clearance(cost, candidate).min()) >= clearance
 
         if clear(positions):
             return positions

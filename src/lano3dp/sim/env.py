@@ -322,7 +322,7 @@ class TabletopEnv(gym.Env):
                         quat: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         """The target this step reaches: `position` / `quat` (wxyz, same hemisphere as `start_quat`),
         moved back towards the start so that neither speed limit is exceeded. Returns (position, quat, limited)."""
-        max_distance = self.motion_limits.linear / self.control_hz
+        max_distance = self.max_ee_step
         max_angle = self.motion_limits.angular / self.control_hz
         offset = position - start_pos
         distance = float(np.linalg.norm(offset))

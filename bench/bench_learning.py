@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import platform
 import shlex
 import sys
@@ -68,6 +69,23 @@ RECIPES = {
     # the expert's path, which DART labels with the way back
     "pose_augment_dart": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
                           "train": {"augment": {}}, "collect": {"dart_noise": 0.03}},
+    # ... with the scene turned by up to 45 or 180 degrees (not 5): the phone and the broom were placed a median
+    # 20-90 degrees off, the policy under-turning its grasp and carry yaws. A turned demonstration, its hand's start
+    # turned with it, is still valid and spreads 40 demonstrations' yaws round the circle
+    "pose_turn45": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
+                    "train": {"augment": {"yaw": math.radians(45.0)}}},
+    "pose_turn90": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
+                    "train": {"augment": {"yaw": math.radians(90.0)}}},
+    # ... on DART demonstrations (the broom failed after reaching the dirt, in states just off the expert's path)
+    "pose_turn45_dart": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
+                         "train": {"augment": {"yaw": math.radians(45.0)}}, "collect": {"dart_noise": 0.03}},
+    # ... with the clouds' third moments (PolicyConfig.object_pose_skew): turned 45 degrees, the broom still swept
+    # with its head and handle swapped in a third of the traced failures
+    "pose_skew_turn45": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True,
+                                                  "object_pose_skew": True},
+                         "train": {"augment": {"yaw": math.radians(45.0)}}},
+    "pose_turn180": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
+                     "train": {"augment": {"yaw": math.pi}}},
     "previous": {"points": 128, "policy": dict(action_frame="absolute", n_obs_steps=2, down_dims=(64, 128, 256),
                                                point_hidden_dims=(64, 128, 256), diffusion_step_embed_dim=128)},
 }

@@ -6,6 +6,7 @@ Runs the same way under torchrun for data-parallel training:
 
 from __future__ import annotations
 
+import math
 from enum import StrEnum
 from pathlib import Path
 
@@ -46,6 +47,9 @@ def train_command(
     pose_features: bool = typer.Option(False, "--pose-features/--no-pose-features",
                                        help="Give the policy each object cloud's centroid and horizontal principal "
                                             "axis beside its learned feature (objects only)."),
+    pose_skew: bool = typer.Option(False, "--pose-skew/--no-pose-skew",
+                                   help="With --pose-features, also each cloud's horizontal third moment: which end "
+                                        "of the object its points reach farther towards (a tool's handle)."),
     horizon: int = typer.Option(16, help="Predicted trajectory length H."),
     n_obs_steps: int = typer.Option(1, "--n-obs-steps", help="Observation steps To the policy sees."),
     n_action_steps: int = typer.Option(8, "--n-action-steps", help="Actions Ta executed per chunk."),
@@ -66,14 +70,17 @@ def train_command(
     ema: bool = typer.Option(True, "--ema/--no-ema", help="Save the EMA of the weights as the policy."),
     augment: bool = typer.Option(False, "--augment/--no-augment",
                                  help="Move each window's scene, hand and actions by one small planar rigid motion "
-                                      "(2 cm, 5 deg), jitter and drop cloud points (lano3dp.augment; not yet "
-                                      "ablated, so off by default)."),
+                                      "(2 cm, 5 deg), jitter and drop cloud points (lano3dp.augment; off by "
+                                      "default: its gain was inside the noise)."),
+    augment_yaw: float | None = typer.Option(None, "--augment-yaw", min=0.0, max=180.0,
+                                             help="With --augment, turn each window by up to this many degrees "
+                                                  "instead of 5 (45 lifted the phone and the broom; 180 hurt the "
+                                                  "phone)."),
     progress: bool = typer.Option(True, "--progress/--no-progress", help="Show a progress bar."),
 ) -> None:
     """Train an object-centric diffusion policy (or a DP3 / DP baseline); resumes a killed run."""
     import os
 
-    from lano3dp.augment import AugmentConfig
     from lano3dp.cli import _options
     from lano3dp.policy import down_dims_for
     from lano3dp.train import TrainConfig, policy_config_for_dataset, train
@@ -87,6 +94,8 @@ def train_command(
                      horizon=horizon, n_obs_steps=n_obs_steps, n_action_steps=n_action_steps)
     if pose_features:
         overrides["object_pose_features"] = True
+    if pose_skew:
+        overrides["object_pose_skew"] = True
     if n_points is not None:
         overrides["n_points"] = n_points
     policy = policy_config_for_dataset(data, **overrides)
@@ -94,7 +103,7 @@ def train_command(
                          warmup_steps=warmup_steps, val_ratio=val_ratio, val_every=val_every,
                          ckpt_every=ckpt_every, seed=seed, device=device, threads=threads, cpu_minutes=minutes,
                          num_workers=num_workers, bf16=bf16, ema=ema, progress=progress,
-                         augment=AugmentConfig() if augment else None, time_stride=time_stride)
+                         augment=augment_config(augment, augment_yaw), time_stride=time_stride)
     final = train(config)
     if int(os.environ.get("RANK", "0")) == 0:
         typer.echo(f"final checkpoint: {final}")
@@ -102,3 +111,14 @@ def train_command(
 
 def register(app: typer.Typer) -> None:
     app.command("train")(train_command)
+
+
+def augment_config(augment: bool, yaw_degrees: float | None):
+    """The training augmentation the options ask for (None: off)."""
+    from lano3dp.augment import AugmentConfig
+
+    if yaw_degrees is not None and not augment:
+        raise typer.BadParameter("--augment-yaw needs --augment", param_hint="--augment-yaw")
+    if not augment:
+        return None
+    return AugmentConfig() if yaw_degrees is None else AugmentConfig(yaw=math.radians(yaw_degrees))

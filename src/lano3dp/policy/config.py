@@ -65,6 +65,9 @@ class PolicyConfig:
         object_pose_features: give the UNet, beside each object cloud's learned feature, the cloud's centroid
             and its horizontal principal axis (ObjectCloudsEncoder.pose_features): the yaw an object lies at
             decides the grasp, and a point MLP learned it poorly from 40 demonstrations (objects only).
+        object_pose_skew: add to those features each cloud's horizontal third moment (which end of the object
+            its points reach farther towards): the principal axis cannot tell a broom's head from its handle, and
+            the policy swept with the broom turned half a turn (needs object_pose_features).
         extra: free-form notes the model does not use. extra["observation"] says how the training observations
             were made (camera, crop box, points, control_hz and, when not 1, time_stride: recorded steps between
             consecutive window steps; see `time_stride`), so a checkpoint acts without its dataset.
@@ -96,6 +99,7 @@ class PolicyConfig:
     num_inference_steps: int | None = 10
     action_frame: str = "absolute"
     object_pose_features: bool = False
+    object_pose_skew: bool = False
     extra: dict[str, Any] = field(default_factory=dict)  # free-form notes (dataset, skill), not used by the model
 
     def __post_init__(self):
@@ -119,6 +123,7 @@ class PolicyConfig:
              f"inference_scheduler must be one of {INFERENCE_SCHEDULERS}, got {self.inference_scheduler!r}")
         need(self.action_frame in ACTION_FRAMES,
              f"action_frame must be one of {ACTION_FRAMES}, got {self.action_frame!r}")
+        need(self.object_pose_features or not self.object_pose_skew, "object_pose_skew needs object_pose_features")
         try:
             observation.validate(self)
         except ValueError as error:
@@ -192,7 +197,7 @@ class PolicyConfig:
             raise ValueError(f"PolicyConfig: unknown fields {unknown}")
         # configs written before these fields existed predicted world positions without pose features,
         # whatever today's defaults are
-        return cls(**({"action_frame": "absolute", "object_pose_features": False} | data))
+        return cls(**({"action_frame": "absolute", "object_pose_features": False, "object_pose_skew": False} | data))
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2, sort_keys=True)

@@ -88,13 +88,16 @@ class ObjectCloudsEncoder(nn.Module):
     """
 
     POSE_DIM = 5  # centroid (3) + principal-axis pair (2), see pose_features
+    SKEW_DIM = 2  # horizontal third moment, see skew_features
 
     def __init__(self, config: PolicyConfig):
         super().__init__()
         self.n_slots = config.n_slots
         self.point_encoder = make_point_encoder(config)
         self.with_pose = config.object_pose_features
-        self.out_dim = config.n_slots * (config.encoder_out + (self.POSE_DIM if self.with_pose else 0))
+        self.with_skew = config.object_pose_skew
+        pose_dim = (self.POSE_DIM if self.with_pose else 0) + (self.SKEW_DIM if self.with_skew else 0)
+        self.out_dim = config.n_slots * (config.encoder_out + pose_dim)
 
     @staticmethod
     def pose_features(clouds: torch.Tensor) -> torch.Tensor:
@@ -112,6 +115,20 @@ class ObjectCloudsEncoder(nn.Module):
         spread = (s_xx + s_yy).clamp_min(1e-8)
         return torch.cat([centroid, torch.stack([(s_xx - s_yy) / spread, 2 * s_xy / spread], dim=-1)], dim=-1)
 
+    @staticmethod
+    def skew_features(clouds: torch.Tensor) -> torch.Tensor:
+        """clouds (M, N, 3) -> (M, 2): the horizontal third moment mean(|c|^2 c) / mean(|c|^2)^1.5 of the points
+        c about their centroid.
+
+        It points to the side the cloud reaches farther towards (from a broom's head along its handle), which the
+        doubled-angle axis cannot tell; it is ~0 for a cloud symmetric about its centre (a slab, a disc), is
+        dimensionless, and needs no axis, so it never jumps.
+        """
+        centred = clouds[..., :2] - clouds[..., :2].mean(dim=-2, keepdim=True)
+        squared = centred.square().sum(-1, keepdim=True)
+        spread = squared.mean(dim=-2).clamp_min(1e-8)
+        return (squared * centred).mean(dim=-2) / spread.pow(1.5)
+
     def forward(self, clouds: torch.Tensor) -> torch.Tensor:
         if clouds.ndim != 4 or clouds.shape[1] != self.n_slots or clouds.shape[-1] != 3:
             raise ValueError(f"object_clouds must be (batch, {self.n_slots} slots, points, 3), "
@@ -121,6 +138,8 @@ class ObjectCloudsEncoder(nn.Module):
         features = self.point_encoder(flat)
         if self.with_pose:
             features = torch.cat([features, self.pose_features(flat)], dim=-1)
+        if self.with_skew:
+            features = torch.cat([features, self.skew_features(flat)], dim=-1)
         return features.reshape(m, k * features.shape[-1])
 
 

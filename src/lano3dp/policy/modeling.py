@@ -36,12 +36,15 @@ NORMALIZER_NAME = "normalizer.json"
 # newer versions instead of producing silently wrong actions. Files without the field are version 1;
 # version 2 adds relative action positions (config.action_frame), so only such checkpoints are written as 2
 # and a release that predates them refuses them rather than reading offsets as world positions; version 3
-# adds the object pose features (config.object_pose_features), whose UNet input is wider.
-CHECKPOINT_FORMAT_VERSION = 3
+# adds the object pose features (config.object_pose_features), whose UNet input is wider; version 4 widens it
+# again by their third moments (config.object_pose_skew).
+CHECKPOINT_FORMAT_VERSION = 4
 
 
 def format_version_for(config: PolicyConfig) -> int:
     """The oldest checkpoint format that can hold a policy of this config."""
+    if config.object_pose_skew:
+        return 4
     if config.object_pose_features:
         return 3
     return 2 if config.action_frame == "relative" else 1

@@ -69,9 +69,9 @@ RECIPES = {
     # the expert's path, which DART labels with the way back
     "pose_augment_dart": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
                           "train": {"augment": {}}, "collect": {"dart_noise": 0.03}},
-    # ... with the scene turned by up to 45 or 180 degrees (not 5): the phone and the broom were placed a median
-    # 20-90 degrees off, the policy under-turning its grasp and carry yaws. A turned demonstration, its hand's start
-    # turned with it, is still valid and spreads 40 demonstrations' yaws round the circle
+    # ... with each window turned by up to 45, 90 or 180 degrees (not 5): the phone was placed 19-88 degrees off
+    # where the expert turns far, the policy under-turning. The experts choose every yaw relative to the hand's, so
+    # a window turned with its hand is still a demonstration; 40 of them covered the circle thinly
     "pose_turn45": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
                     "train": {"augment": {"yaw": math.radians(45.0)}}},
     "pose_turn90": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
@@ -80,7 +80,7 @@ RECIPES = {
     "pose_turn45_dart": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
                          "train": {"augment": {"yaw": math.radians(45.0)}}, "collect": {"dart_noise": 0.03}},
     # ... with the clouds' third moments (PolicyConfig.object_pose_skew): turned 45 degrees, the broom still swept
-    # with its head and handle swapped in a third of the traced failures
+    # reversed in 4 of 13 traced failures, and the doubled-angle axis cannot tell its head from its handle
     "pose_skew_turn45": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True,
                                                   "object_pose_skew": True},
                          "train": {"augment": {"yaw": math.radians(45.0)}}},

@@ -460,20 +460,25 @@ def test_skew_features_point_from_a_brooms_head_along_its_handle_and_turn_with_i
     assert float(ObjectCloudsEncoder.skew_features(_slab(yaw)[None]).norm()) < 1e-4
 
 
-def test_a_policy_with_skew_features_round_trips_as_format_four(tmp_path):
+def _round_trips_with_format(tmp_path, policy, version: str) -> DiffusionPolicy:
+    """Save `policy`, check its weights' format version, and load it back acting identically."""
     from safetensors import safe_open
 
-    policy = make_policy(seed=3, object_pose_features=True, object_pose_skew=True, n_obs_steps=1)
-    plain = make_policy(seed=3, object_pose_features=True, n_obs_steps=1)
-    assert policy.obs_encoder.out_dim == plain.obs_encoder.out_dim + 2 * ObjectCloudsEncoder.SKEW_DIM
     obs = random_obs(policy.config, batch=1)
     before = policy.predict_action_chunk(obs, generator=torch.Generator().manual_seed(2)).trajectory
     policy.save_pretrained(tmp_path / "ckpt")
     with safe_open(str(tmp_path / "ckpt" / "model.safetensors"), framework="pt") as handle:
-        assert handle.metadata()["format_version"] == "4"
+        assert handle.metadata()["format_version"] == version
     loaded = DiffusionPolicy.from_pretrained(tmp_path / "ckpt")
-    assert loaded.config.object_pose_skew
     assert torch.equal(loaded.predict_action_chunk(obs, generator=torch.Generator().manual_seed(2)).trajectory, before)
+    return loaded
+
+
+def test_a_policy_with_skew_features_round_trips_as_format_four(tmp_path):
+    policy = make_policy(seed=3, object_pose_features=True, object_pose_skew=True, n_obs_steps=1)
+    plain = make_policy(seed=3, object_pose_features=True, n_obs_steps=1)
+    assert policy.obs_encoder.out_dim == plain.obs_encoder.out_dim + 2 * ObjectCloudsEncoder.SKEW_DIM
+    assert _round_trips_with_format(tmp_path, policy, "4").config.object_pose_skew
     with pytest.raises(ValueError, match="object_pose_skew needs object_pose_features"):
         tiny_config(object_pose_skew=True)
     data = tiny_config(object_pose_features=True).to_dict()
@@ -482,19 +487,10 @@ def test_a_policy_with_skew_features_round_trips_as_format_four(tmp_path):
 
 
 def test_a_policy_with_pose_features_sees_the_yaw_and_round_trips_as_format_three(tmp_path):
-    from safetensors import safe_open
-
     policy = make_policy(seed=3, object_pose_features=True, n_obs_steps=1)
     plain = make_policy(seed=3, n_obs_steps=1)
     assert policy.obs_encoder.out_dim == plain.obs_encoder.out_dim + 2 * ObjectCloudsEncoder.POSE_DIM
-    obs = random_obs(policy.config, batch=1)
-    before = policy.predict_action_chunk(obs, generator=torch.Generator().manual_seed(2)).trajectory
-    policy.save_pretrained(tmp_path / "ckpt")
-    with safe_open(str(tmp_path / "ckpt" / "model.safetensors"), framework="pt") as handle:
-        assert handle.metadata()["format_version"] == "3"
-    loaded = DiffusionPolicy.from_pretrained(tmp_path / "ckpt")
-    assert loaded.config.object_pose_features
-    assert torch.equal(loaded.predict_action_chunk(obs, generator=torch.Generator().manual_seed(2)).trajectory, before)
+    assert _round_trips_with_format(tmp_path, policy, "3").config.object_pose_features
     with pytest.raises(ValueError, match="object_pose_features needs obs_type 'objects'"):
         tiny_config(obs_type="scene", object_pose_features=True)
     data = tiny_config().to_dict()

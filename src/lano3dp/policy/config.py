@@ -66,8 +66,9 @@ class PolicyConfig:
             and its horizontal principal axis (ObjectCloudsEncoder.pose_features): the yaw an object lies at
             decides the grasp, and a point MLP learned it poorly from 40 demonstrations (objects only).
         object_pose_skew: add to those features each cloud's horizontal third moment (which end of the object
-            its points reach farther towards): the principal axis cannot tell a broom's head from its handle, and
-            the policy swept with the broom turned half a turn (needs object_pose_features).
+            its points reach farther towards): the principal axis cannot tell a broom's head from its handle. It
+            did not lift the broom's success (README, "Learning efficiency"), so it is opt-in (needs
+            object_pose_features).
         extra: free-form notes the model does not use. extra["observation"] says how the training observations
             were made (camera, crop box, points, control_hz and, when not 1, time_stride: recorded steps between
             consecutive window steps; see `time_stride`), so a checkpoint acts without its dataset.

@@ -43,6 +43,15 @@ from lano3dp.train import checkpoint_progress, policy_config_for_dataset
 ROOT = Path(__file__).resolve().parent.parent
 PAPER_TASKS = ("open_drawer", "open_wine_bottle", "sweep_to_dustpan", "phone_on_base", "put_item_in_drawer",
                "water_plants", "close_microwave", "bowl_pour", "bottle_upright", "bottle_in_drawer")
+
+
+def turned_pose_recipe(degrees: float, collect: dict | None = None, **policy) -> dict:
+    """The pose-feature recipe trained on windows turned by up to `degrees` (lano3dp.augment's yaw)."""
+    recipe = {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True, **policy},
+              "train": {"augment": {"yaw": math.radians(degrees)}}}
+    return recipe | ({"collect": collect} if collect else {})
+
+
 # Policy settings per recipe; everything else (optimiser, schedule, EMA) is shared. "previous" is the
 # default before the learning-efficiency work (d63c154), kept to measure the new one against.
 RECIPES = {
@@ -70,22 +79,17 @@ RECIPES = {
     "pose_augment_dart": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
                           "train": {"augment": {}}, "collect": {"dart_noise": 0.03}},
     # ... with each window turned by up to 45, 90 or 180 degrees (not 5): the phone was placed 19-88 degrees off
-    # where the expert turns far, the policy under-turning. The experts choose every yaw relative to the hand's, so
-    # a window turned with its hand is still a demonstration; 40 of them covered the circle thinly
-    "pose_turn45": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
-                    "train": {"augment": {"yaw": math.radians(45.0)}}},
-    "pose_turn90": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
-                    "train": {"augment": {"yaw": math.radians(90.0)}}},
+    # where the expert turns far, the policy under-turning. The experts choose every yaw relative to the hand's
+    # start or to each other, so a window turned with its hand is still a demonstration; 40 of them covered the
+    # circle thinly
+    "pose_turn45": turned_pose_recipe(45.0),
+    "pose_turn90": turned_pose_recipe(90.0),
+    "pose_turn180": turned_pose_recipe(180.0),
     # ... on DART demonstrations (the broom failed after reaching the dirt, in states just off the expert's path)
-    "pose_turn45_dart": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
-                         "train": {"augment": {"yaw": math.radians(45.0)}}, "collect": {"dart_noise": 0.03}},
+    "pose_turn45_dart": turned_pose_recipe(45.0, collect={"dart_noise": 0.03}),
     # ... with the clouds' third moments (PolicyConfig.object_pose_skew): turned 45 degrees, the broom still swept
     # reversed in 4 of 13 traced failures, and the doubled-angle axis cannot tell its head from its handle
-    "pose_skew_turn45": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True,
-                                                  "object_pose_skew": True},
-                         "train": {"augment": {"yaw": math.radians(45.0)}}},
-    "pose_turn180": {"points": 64, "policy": {"action_frame": "absolute", "object_pose_features": True},
-                     "train": {"augment": {"yaw": math.pi}}},
+    "pose_skew_turn45": turned_pose_recipe(45.0, object_pose_skew=True),
     "previous": {"points": 128, "policy": dict(action_frame="absolute", n_obs_steps=2, down_dims=(64, 128, 256),
                                                point_hidden_dims=(64, 128, 256), diffusion_step_embed_dim=128)},
 }

@@ -6,7 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lano3dp.geometry.rotations import rot6d_to_matrix
+from lano3dp.sim.experts import OPEN
 from lano3dp.sim.objects.articulated import DustpanParts
+from lano3dp.sim.robot import TOP_DOWN
 from lano3dp.sim.tasks.sweep_to_dustpan import DIRT_HALF, MIN_SWEPT, N_DIRT
 from test_tasks_common import make_env, teleport
 
@@ -50,3 +53,18 @@ def test_expert_sweeps_holding_the_broom(env):
         held.append(env.sim.held_object())
     assert held[-1] == "broom"
     assert env.task.is_success(env.sim, env.episode.layout)
+
+
+def test_expert_grasps_the_handle_nearest_the_hands_start_yaw():
+    """Both grasps across the handle need the same carry turn; the expert must not pick the mirrored one
+    (half a wrist turn more) at random, or the demonstrations disagree on where the hand goes."""
+    env = make_env("sweep_to_dustpan")
+    try:
+        for seed in range(12):
+            env.reset(seed=seed)
+            actions = env.expert_plan().actions()
+            grasp = actions[int(np.argmax(actions[:, 9] > OPEN)) - 1]
+            relative = rot6d_to_matrix(grasp[3:9]) @ TOP_DOWN.T  # rot_z(yaw) for a top-down hand
+            assert abs(np.arctan2(relative[1, 0], relative[0, 0])) <= np.pi / 2 + 1e-6, seed
+    finally:
+        env.close()

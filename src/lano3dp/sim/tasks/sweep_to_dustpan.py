@@ -9,9 +9,10 @@ side of the table at any yaw. Instance variation: broom and dustpan scaled 0.8 /
 recoloured, the broom never larger than the dustpan (its head must fit the mouth).
 
 Expert: top-down grasp of the handle at the broom's centre of mass (fingers across the handle,
-tips 2 mm above the table), lift 6 cm, turn and carry the broom until its head is behind the
-dirt with the handle along v, lower the head to 2 mm above the table, push along v until the
-head is 3.5 cm short of the dustpan's back wall, lift the broom (still held).
+tips 2 mm above the table; of the two such grasps, the one nearest the hand's start yaw), lift
+6 cm, turn and carry the broom until its head is behind the dirt with the handle along v, lower
+the head to 2 mm above the table, push along v until the head is 3.5 cm short of the dustpan's
+back wall, lift the broom (still held).
 
 Success: at least 3 of the 4 dirt cubes lie inside the dustpan (between its mouth and back wall,
 between its side walls, on the floor).

@@ -14,7 +14,8 @@ Per task, the policy packaged for it (`lano3dp eval --task T` without --checkpoi
                   (`MetricGradient`), segments densified x4, the hand and the held object as a swept body, the
                   path costed from the hand (`AnchoredPath`) and pushed clear after sampling (`push_clear`)
         sphere    the default with the previous body model (a ball of the held object's diameter round the EE)
-  - and, with the default sampler (and none beside it), the harder rows of `--extra-variations`: a box,
+        turned    the default with each obstacle's push turned 60 degrees round it (`TurnedPush`)
+  - and, with the default and turned samplers (and none beside them), the harder rows of `--extra-variations`: a box,
     a cluster of two, two obstacles, one that moves (re-fitted before every chunk).
 Obstacle episodes use the first seeds from 1000000 whose layout has room for the obstacles (chosen from the
 layout alone: `EvalConfig.obstacle_scenes_only`), clean ones 1000000 + i.
@@ -49,12 +50,16 @@ ROOT = Path(__file__).resolve().parent.parent
 # EvalConfig fields of each sampler; a guidance mode alone is the recommended preset in that mode
 SAMPLERS = {
     "none": {"guidance": "none"},
-    "A_k": {"guidance": {"mode": "noisy", "anchored": False, "repair_steps": 0, "hold_unclear": False}},
+    "A_k": {"guidance": {"mode": "noisy", "anchored": False, "repair_steps": 0, "hold_unclear": False,
+                         "push_turn": 0.0}},
     "paper": {"guidance": asdict(GUIDANCE_PRESETS["paper"]), "scheduler": "ddpm", "steps": 100,
               "obstacle": {"body": "sphere"}},
     "default": {"guidance": "clean"},
     "sphere": {"guidance": "clean", "obstacle": {"body": "sphere"}},  # the default before the swept body: its ablation
+    "turned": {"guidance": {"mode": "clean", "push_turn": 60.0}},  # the default with each push turned round
 }
+# the harder rows compare the project's own guidance with none, not prior work's forms
+EXTRA_SAMPLERS = ("none", "default", "turned")
 FAILURE_CLASSES = ("target not seen", "touched the obstacle", "grasp missed", "lost on the carry",
                    "last stage unfinished", "other")
 
@@ -178,7 +183,7 @@ def main(argv=None) -> int:
             entry["clean"] = row(*clean, None)
         jobs = [("obstacle", s) for s in samplers]
         if task in extra_tasks:
-            jobs += [(v, s) for v in extra_variations for s in ("none", "default") if s in samplers]
+            jobs += [(v, s) for v in extra_variations for s in EXTRA_SAMPLERS if s in samplers]
         for variation, sampler in jobs:
             name = f"{variation.replace(':', '_')}_{sampler}"
             measured = evaluate(task, variation, name, sampler)

@@ -29,7 +29,7 @@ GUIDANCE_OPTIONS = {"--guidance": "mode", "--rho": "rho", "--last-steps": "last_
                     "--per-train-step": "per_train_step", "--guided-clip-range": "guided_clip_range",
                     "--push-weight": "push_weight", "--checked": "checked", "--guide-when-needed": "guide_when_needed",
                     "--anchored/--no-anchored": "anchored", "--repair-steps": "repair_steps",
-                    "--hold-unclear/--no-hold-unclear": "hold_unclear"}
+                    "--hold-unclear/--no-hold-unclear": "hold_unclear", "--push-turn": "push_turn"}
 
 
 def _value(text: str):
@@ -90,14 +90,15 @@ def test_the_readme_obstacle_and_sampler_defaults_are_the_codes():
 def test_the_runners_own_defaults_are_the_recommended_presets():
     runtime, model, settings = RuntimeConfig(), ObstacleModel(), ObstacleSettings()
     assert (runtime.metric_gradient, runtime.densify, runtime.guide_when_needed, runtime.anchored,
-            runtime.repair_steps, runtime.hold_unclear) == (
+            runtime.repair_steps, runtime.hold_unclear, runtime.push_turn) == (
         RECOMMENDED.metric_gradient, RECOMMENDED.densify, RECOMMENDED.guide_when_needed, RECOMMENDED.anchored,
-        RECOMMENDED.repair_steps, RECOMMENDED.hold_unclear)
+        RECOMMENDED.repair_steps, RECOMMENDED.hold_unclear, RECOMMENDED.push_turn)
     assert CheckConfig().densify == RECOMMENDED.densify
     assert (model.shape, model.margin, model.body, model.held_radius, model.refit_every_chunk) == (
         settings.shape, settings.margin, settings.body, settings.held_radius, settings.refit)
     built = RuntimeConfig.from_settings(GuidanceSettings(), seed=3)
     assert built.guidance.scale == RECOMMENDED.rho and built.guidance.last_steps == RECOMMENDED.last_steps
+    assert RuntimeConfig.from_settings(GuidanceSettings(push_turn=30.0)).push_turn == 30.0
     assert built.obstacle == model and built.checked is None and built.seed == 3
     assert RuntimeConfig.from_settings(GuidanceSettings(mode="none")).guidance is None
 
@@ -129,6 +130,7 @@ def captured(monkeypatch):
 
 OPTIONS = ["--guidance", "clean", "--guidance-preset", "paper", "--rho", "2", "--guided-clip-range", "3",
            "--push-weight", "alpha_bar", "--checked", "--anchored", "--repair-steps", "5", "--hold-unclear",
+           "--push-turn", "30",
            "--margin", "0.03", "--body", "sphere", "--held-radius", "0.05",
            "--refit-obstacles", "--obstacle-shape", "box", "--image-size", "96"]
 
@@ -142,7 +144,8 @@ def test_eval_and_run_options_map_onto_the_nested_settings(captured, tmp_path):
         # the paper preset, with the given options over it
         assert config.guidance == GuidanceSettings(mode="clean", rho=2.0, last_steps=10, metric_gradient=False,
                                                    densify=1, guided_clip_range=3.0, push_weight="alpha_bar",
-                                                   checked=True, anchored=True, repair_steps=5, hold_unclear=True)
+                                                   checked=True, anchored=True, repair_steps=5, hold_unclear=True,
+                                                   push_turn=30.0)
         assert config.obstacle == ObstacleSettings(shape="box", margin=0.03, body="sphere", held_radius=0.05,
                                                    refit=True)
         assert config.perception == PerceptionSettings(image_size=96)

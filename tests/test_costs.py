@@ -274,3 +274,58 @@ def test_swept_body_leaves_a_path_whose_held_object_hangs_away_from_the_obstacle
     assert ball(path.double()).max().item() > 0  # the sphere model of the same reach would push it
     with pytest.raises(ValueError, match="radii"):
         SweptBody(post, [[0.0, 0.0, 0.0]], [0.01, 0.02])
+
+
+def test_turned_push_turns_the_gradient_round_the_obstacle_and_keeps_the_cost():
+    from lano3dp.guidance.costs import TurnedPush, obstacle_axis_xy
+
+    cylinder = Cylinder((0.5, 0.01), radius=0.03, margin=0.02)  # a hair left of the way along +x
+    start = (0.0, 0.0, 0.2)
+    waypoints = pts((0.25, 0.0, 0.2), (0.46, 0.0, 0.2), (0.9, 0.0, 0.2)).requires_grad_(True)
+    turned = TurnedPush(cylinder, obstacle_axis_xy(cylinder), start, math.radians(45))
+    (plain,) = torch.autograd.grad(cylinder(waypoints).sum(), waypoints)
+    (bent,) = torch.autograd.grad(turned(waypoints).sum(), waypoints)
+    assert torch.equal(turned(waypoints), cylinder(waypoints))
+    assert torch.equal(turned.clearance(waypoints), cylinder.clearance(waypoints))
+    push, bent_push = -plain[0, 1, :2], -bent[0, 1, :2]
+    assert push[0] < 0 and abs(push[1]) < abs(push[0])  # straight back, along the way
+    assert bent_push.norm() == pytest.approx(float(push.norm()))
+    angle = math.atan2(bent_push[1], bent_push[0]) - math.atan2(push[1], push[0])
+    assert math.degrees(angle) == pytest.approx(45.0)  # counter-clockwise: round the obstacle's right
+    assert bent_push[1] < 0
+    mirrored = TurnedPush(Cylinder((0.5, -0.01), 0.03, margin=0.02), (0.5, -0.01), start, math.radians(45))
+    (other,) = torch.autograd.grad(mirrored(waypoints).sum(), waypoints)
+    assert -other[0, 1, 1] > 0  # an obstacle on the right is passed on the left
+
+
+def _descend_to_goal(cost, goal: torch.Tensor, steps: int = 400) -> torch.Tensor:
+    """A point pulled 1 cm a step towards `goal` and pushed 1.5 cm a step by `cost`: a policy's pull and the
+    guidance's push on one waypoint, as the chunk is re-planned from wherever the hand got."""
+    position = torch.tensor([[[0.0, 0.0, 0.2]]], dtype=torch.float64)
+    for _ in range(steps):
+        variable = position.clone().requires_grad_(True)
+        (gradient,) = torch.autograd.grad(cost(variable).sum(), variable)
+        pull = goal - position
+        push = -gradient / gradient.norm().clamp_min(1e-12) * (gradient.norm() > 0)
+        position = position + 0.01 * pull / pull.norm().clamp_min(1e-12) + 0.015 * push
+        position[..., 2] = 0.2
+    return position[0, 0]
+
+
+def test_a_head_on_path_goes_round_with_the_turned_push_and_stalls_without():
+    from lano3dp.guidance.costs import obstacle_guidance_cost
+
+    # dead ahead: the straight push is exactly against the pull, the symmetric case a policy's pull (which
+    # returns a pushed chunk to the demonstrations' way) keeps the path in
+    cylinder = Cylinder((0.5, 0.0), radius=0.03, margin=0.02)
+    goal = torch.tensor([1.0, 0.0, 0.2], dtype=torch.float64)
+    stalled = _descend_to_goal(obstacle_guidance_cost([cylinder]), goal)
+    assert float(stalled[0]) < 0.5  # held in front of the obstacle
+    # the turned cost reads its side from the path to the goal, as a chunk's end would give it
+    for turn in (math.radians(30), math.radians(60)):
+        def cost(position, turn=turn):
+            path = torch.cat([position, goal.reshape(1, 1, 3)], 1)
+            start = position[0, 0].detach().numpy()
+            return obstacle_guidance_cost([cylinder], start=start, turn=turn)(path)
+        reached = _descend_to_goal(cost, goal)
+        assert float((reached - goal).norm()) < 0.02, turn

@@ -320,6 +320,20 @@ def test_guidance_reaches_the_policy_only_with_obstacles_and_bends_the_path_clea
     assert all(call["guidance"] is None for call in free_policy.calls)
 
 
+def test_the_guidance_cost_turns_each_obstacles_push_as_configured(observer):
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
+    guidance = GuidanceConfig(mode="clean", scale=0.04, last_steps=10)
+    costs = {}
+    for turn in (0.0, 60.0):
+        policy = FakePolicy()
+        config = RuntimeConfig(guidance=guidance, obstacle=model, push_turn=turn)
+        rollout(env, PolicyRunner(policy, observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
+        costs[turn] = repr(policy.calls[0]["cost"])
+    assert "TurnedPush" not in costs[0.0]
+    assert "TurnedPush" in costs[60.0] and "angle=1.047" in costs[60.0]
+
+
 def test_a_chunk_guidance_left_inside_the_margin_is_pushed_clear_after_sampling(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)

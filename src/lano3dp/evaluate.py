@@ -477,7 +477,8 @@ FLAT_EVAL_FIELDS = {
 # What flat results saved before a field existed were made with, where that is not the field's default.
 EVAL_FIELDS_BEFORE = {"body": "sphere"}
 # ... and the same for fields added to a settings section (every guided result before them ran without).
-SECTION_FIELDS_BEFORE = {"guidance": {"anchored": False, "repair_steps": 0, "hold_unclear": False}}
+SECTION_FIELDS_BEFORE = {"guidance": {"anchored": False, "repair_steps": 0, "hold_unclear": False,
+                                       "push_turn": 0.0}}
 EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
 
 

@@ -31,6 +31,7 @@ duck-typed, so a user's own robot plugs in the same way.
 
 from __future__ import annotations
 
+import math
 import time
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -107,6 +108,7 @@ class RuntimeConfig:
             `guidance.ExecutedPath`; 0: off).
         hold_unclear: after the repair, execute only the start of the chunk predicted to clear the obstacles by
             half the margin, and hold still when none does (`guidance.clear_prefix`); the next chunk re-plans.
+        push_turn: degrees each obstacle's push is turned round it (`guidance.TurnedPush`; with `anchored`).
         step_limit: metres the end effector moves at most per env step, which the executed path is predicted
             under (the built-in simulator's `max_ee_step`, filled in by evaluation and `run`; None: every
             waypoint is assumed reached).
@@ -127,6 +129,7 @@ class RuntimeConfig:
     anchored: bool = _RECOMMENDED.anchored
     repair_steps: int = _RECOMMENDED.repair_steps
     hold_unclear: bool = _RECOMMENDED.hold_unclear
+    push_turn: float = _RECOMMENDED.push_turn
     step_limit: float | None = None
     seed: int = 0
 
@@ -139,6 +142,8 @@ class RuntimeConfig:
             raise ValueError(f"densify must be >= 1, got {self.densify}")
         if self.repair_steps < 0:
             raise ValueError(f"repair_steps must be >= 0, got {self.repair_steps}")
+        if not 0 <= self.push_turn < 90:
+            raise ValueError(f"push_turn must be in [0, 90) degrees, got {self.push_turn}")
 
     @property
     def guided(self) -> bool:
@@ -166,7 +171,7 @@ class RuntimeConfig:
                    checked=checked, metric_gradient=guidance.metric_gradient, densify=guidance.densify,
                    guide_when_needed=guidance.guide_when_needed, anchored=guidance.anchored,
                    repair_steps=guidance.repair_steps, hold_unclear=guidance.hold_unclear,
-                   step_limit=step_limit, seed=seed)
+                   push_turn=guidance.push_turn, step_limit=step_limit, seed=seed)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
@@ -456,7 +461,8 @@ class PolicyRunner:
         body = self.swept_body(frame, state) if self.config.obstacle.body == "swept" else None
         metric_scale = self.policy.normalizer.scale("action")[:3] if self.config.metric_gradient else None
         cost = obstacle_guidance_cost(list(self.obstacles), body=body, densify=self.config.densify,
-                                      action_scale=metric_scale, start=state[:3] if self.config.anchored else None)
+                                      action_scale=metric_scale, start=state[:3] if self.config.anchored else None,
+                                      turn=math.radians(self.config.push_turn))
         if body is not None:
             self.held_radius = body_reach(*body)
         return cost

@@ -211,6 +211,10 @@ REPAIR_STEPS = typer.Option(None, "--repair-steps", min=0,
                             help="After a guided sample, at most this many 1 cm steps of plain cost descent until "
                                  "the path the arm will take through the chunk clears by the margin (0: off; "
                                  f"default: {_preset_values('repair_steps')}).")
+PUSH_TURN = typer.Option(None, "--push-turn", min=0.0, max=89.9,
+                         help="Degrees to turn each obstacle's push round it, towards the side the chunk already "
+                              "passes, so a chunk headed straight at it goes round rather than back (0: straight "
+                              f"away; needs --anchored; default: {_preset_values('push_turn')}).")
 HOLD_UNCLEAR = typer.Option(None, "--hold-unclear/--no-hold-unclear",
                             help="Execute only the start of a guided chunk predicted to keep half the margin, "
                                  "holding still when none does, and re-plan (default: "
@@ -268,7 +272,8 @@ GUIDANCE_OVERRIDES = {"rho": "rho", "last_steps": "last_steps", "metric_gradient
                       "per_train_step": "per_train_step", "densify": "densify",
                       "guided_clip_range": "guided_clip_range", "push_weight": "push_weight", "checked": "checked",
                       "guide_when_needed": "guide_when_needed", "anchored": "anchored",
-                      "repair_steps": "repair_steps", "hold_unclear": "hold_unclear"}
+                      "repair_steps": "repair_steps", "hold_unclear": "hold_unclear",
+                      "push_turn": "push_turn"}
 
 
 def episode_settings(params: Mapping[str, Any]) -> tuple[GuidanceSettings, ObstacleSettings, PerceptionSettings]:

@@ -197,6 +197,8 @@ def describe_guidance(settings: GuidanceSettings) -> str:
              "on the densified path" if settings.densify > 1 else "on the waypoints"]
     if settings.anchored:
         words.append("from the hand's present position")
+        if settings.push_turn:
+            words.append(f"the push turned {settings.push_turn:g} degrees round each obstacle")
     if settings.repair_steps:
         words.append(f"up to {settings.repair_steps} repair steps after sampling")
     if settings.hold_unclear:

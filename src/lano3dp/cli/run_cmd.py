@@ -35,6 +35,7 @@ def run_command(
     anchored: bool = _options.ANCHORED,
     repair_steps: int = _options.REPAIR_STEPS,
     hold_unclear: bool = _options.HOLD_UNCLEAR,
+    push_turn: float = _options.PUSH_TURN,
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
     obstacle_shape: str = _options.OBSTACLE_SHAPE,

@@ -31,8 +31,10 @@ class GuidanceSettings:
     of the same weight and the scheduler's clipping, the path costed from the hand, pushed clear after sampling
     along the path the arm will take, and only its predicted-clear start executed. Closed-loop results
     (results/obstacles*.md): results/obstacles_hold.md has these (results/obstacles_rho02.md the same with a
-    2 cm push: bowl_pour up, the drawer tasks down, more touches of a moving obstacle); those before it lack
-    the cut, and those before results/obstacles_anchored.md the anchored path and the repair too. The
+    2 cm push: bowl_pour up, the drawer tasks down, more touches of a moving obstacle; results/obstacles_turn.md
+    with each push turned 60 degrees round its obstacle: bowl_pour's detours no longer stall, but it spills
+    more, and touches rose); those before it lack the cut, and those before results/obstacles_anchored.md the
+    anchored path and the repair too. The
     synthetic sweep (results/bench_guidance.json, issue 3) has no row of them: its nearest, DDIM-10 at rho 0.04
     on every step with push_weight "alpha_bar" and guided_clip_range 3, left 1% of sampled paths with a segment
     through the obstacle (2 cm: 19%).
@@ -60,6 +62,9 @@ class GuidanceSettings:
             network pulls back, so a guided chunk can end inside the margin.
         hold_unclear: execute only the start of a guided chunk predicted to keep half the margin, holding still
             when none does, and re-plan (`guidance.clear_prefix`; the paper executes every chunk whole).
+        push_turn: degrees by which each obstacle's push is turned round it, towards the side the chunk already
+            passes (`guidance.TurnedPush`; needs `anchored`; 0: straight away from it, the paper's): a chunk
+            headed straight at an obstacle is then carried round it instead of back.
     """
 
     mode: str = "clean"
@@ -75,6 +80,7 @@ class GuidanceSettings:
     anchored: bool = True
     repair_steps: int = 20
     hold_unclear: bool = True
+    push_turn: float = 0.0
 
     def __post_init__(self):
         if self.mode not in GUIDANCE_MODES:
@@ -85,6 +91,8 @@ class GuidanceSettings:
             raise ValueError(f"densify must be >= 1, got {self.densify}")
         if self.repair_steps < 0:
             raise ValueError(f"repair_steps must be >= 0, got {self.repair_steps}")
+        if not 0 <= self.push_turn < 90:
+            raise ValueError(f"push_turn must be in [0, 90) degrees, got {self.push_turn}")
         if self.guided_clip_range is not None and not (0 < self.guided_clip_range < math.inf):
             raise ValueError(f"guided_clip_range must be a finite number > 0 or None, got {self.guided_clip_range}")
         if self.push_weight not in PUSH_WEIGHTS:
@@ -102,7 +110,7 @@ GUIDANCE_PRESETS: dict[str, GuidanceSettings] = {
     # between them did not). The paper also sampled with DDPM-100 and kept a ball of the held object's diameter
     # clear: add scheduler "ddpm", steps 100 and ObstacleSettings(body="sphere").
     "paper": GuidanceSettings(rho=4.0, last_steps=10, metric_gradient=False, densify=1, anchored=False,
-                              repair_steps=0, hold_unclear=False),
+                              repair_steps=0, hold_unclear=False, push_turn=0.0),
 }
 
 

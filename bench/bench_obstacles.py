@@ -15,6 +15,7 @@ Per task, the policy packaged for it (`lano3dp eval --task T` without --checkpoi
                   path costed from the hand (`AnchoredPath`) and pushed clear after sampling (`push_clear`)
         sphere    the default with the previous body model (a ball of the held object's diameter round the EE)
         turned    the default with each obstacle's push turned 60 degrees round it (`TurnedPush`)
+        turned_half   turned, with half the push (rho 0.02)
   - and, with the default and turned samplers (and none beside them), the harder rows of `--extra-variations`: a box,
     a cluster of two, two obstacles, one that moves (re-fitted before every chunk).
 Obstacle episodes use the first seeds from 1000000 whose layout has room for the obstacles (chosen from the
@@ -57,9 +58,10 @@ SAMPLERS = {
     "default": {"guidance": "clean"},
     "sphere": {"guidance": "clean", "obstacle": {"body": "sphere"}},  # the default before the swept body: its ablation
     "turned": {"guidance": {"mode": "clean", "push_turn": 60.0}},  # the default with each push turned round
+    "turned_half": {"guidance": {"mode": "clean", "push_turn": 60.0, "rho": 0.02}},  # ... and half the push
 }
 # the harder rows compare the project's own guidance with none, not prior work's forms
-EXTRA_SAMPLERS = ("none", "default", "turned")
+EXTRA_SAMPLERS = ("none", "default", "turned", "turned_half")
 FAILURE_CLASSES = ("target not seen", "touched the obstacle", "grasp missed", "lost on the carry",
                    "last stage unfinished", "other")
 

@@ -16,7 +16,10 @@ from lano3dp.guidance.costs import (
     PositionCost,
     Sphere,
     SweptBody,
+    TurnedPush,
     densify,
+    obstacle_axis_xy,
+    obstacle_guidance_cost,
 )
 from lano3dp.guidance.fitting import fit_box, fit_cylinder
 
@@ -277,8 +280,6 @@ def test_swept_body_leaves_a_path_whose_held_object_hangs_away_from_the_obstacle
 
 
 def test_turned_push_turns_the_gradient_round_the_obstacle_and_keeps_the_cost():
-    from lano3dp.guidance.costs import TurnedPush, obstacle_axis_xy
-
     cylinder = Cylinder((0.5, 0.01), radius=0.03, margin=0.02)  # a hair left of the way along +x
     start = (0.0, 0.0, 0.2)
     waypoints = pts((0.25, 0.0, 0.2), (0.46, 0.0, 0.2), (0.9, 0.0, 0.2)).requires_grad_(True)
@@ -313,8 +314,6 @@ def _descend_to_goal(cost, goal: torch.Tensor, steps: int = 400) -> torch.Tensor
 
 
 def test_a_head_on_path_goes_round_with_the_turned_push_and_stalls_without():
-    from lano3dp.guidance.costs import obstacle_guidance_cost
-
     # dead ahead: the straight push is exactly against the pull, the symmetric case a policy's pull (which
     # returns a pushed chunk to the demonstrations' way) keeps the path in
     cylinder = Cylinder((0.5, 0.0), radius=0.03, margin=0.02)

@@ -481,8 +481,8 @@ class TurnedPush:
     paper).
 
     The hinge pushes each waypoint straight away from the obstacle. A chunk headed straight at it is then pushed
-    back along its own way, while the network pulls it forward again: traced bowl_pour detours (tuning scenes)
-    stood 22-25 cm short of a phantom obstacle for 80 steps before the hand went round, and timed out. Here the
+    back along its own way, while the network pulls it forward again: a traced bowl_pour episode guided round a
+    phantom obstacle held the bowl 21-25 cm from its axis for 80 steps before going round, and timed out. Here the
     descent direction is turned by `angle` towards the side of the line from the hand to the chunk's end that
     the obstacle is not on, so the push carries the path round the obstacle (a circulation field, as in
     potential-field navigation); the side is re-read from each call's positions, so it stays put while the hand

@@ -32,12 +32,12 @@ class GuidanceSettings:
     along the path the arm will take, and only its predicted-clear start executed. Closed-loop results
     (results/obstacles*.md): results/obstacles_hold.md has these (results/obstacles_rho02.md the same with a
     2 cm push: bowl_pour up, the drawer tasks down, more touches of a moving obstacle; results/obstacles_turn.md
-    with each push turned 60 degrees round its obstacle: bowl_pour's detours no longer stall, but it spills
-    more, and touches rose); those before it lack the cut, and those before results/obstacles_anchored.md the
-    anchored path and the repair too. The
-    synthetic sweep (results/bench_guidance.json, issue 3) has no row of them: its nearest, DDIM-10 at rho 0.04
-    on every step with push_weight "alpha_bar" and guided_clip_range 3, left 1% of sampled paths with a segment
-    through the obstacle (2 cm: 19%).
+    with each push turned 60 degrees round its obstacle: bowl_pour stalls less but misses more pours, and
+    touches rose; results/obstacles_turn_half.md that with rho 0.02: bowl_pour 82%, the drawer tasks down);
+    those before it lack the cut, and those before results/obstacles_anchored.md the anchored path and the
+    repair too. The synthetic sweep (results/bench_guidance.json, issue 3) has no row of them: its nearest,
+    DDIM-10 at rho 0.04 on every step with push_weight "alpha_bar" and guided_clip_range 3, left 1% of sampled
+    paths with a segment through the obstacle (2 cm: 19%).
     GUIDANCE_PRESETS["paper"] is the paper's form.
 
     Attributes:

@@ -16,8 +16,8 @@ Per task, the policy packaged for it (`lano3dp eval --task T` without --checkpoi
         sphere    the default with the previous body model (a ball of the held object's diameter round the EE)
         turned    the default with each obstacle's push turned 60 degrees round it (`TurnedPush`)
         turned_half   turned, with half the push (rho 0.02)
-  - and, with the default and turned samplers (and none beside them), the harder rows of `--extra-variations`: a box,
-    a cluster of two, two obstacles, one that moves (re-fitted before every chunk).
+  - and, with the default and both turned samplers (and none beside them), the harder rows of
+    `--extra-variations`: a box, a cluster of two, two obstacles, one that moves (re-fitted before every chunk).
 Obstacle episodes use the first seeds from 1000000 whose layout has room for the obstacles (chosen from the
 layout alone: `EvalConfig.obstacle_scenes_only`), clean ones 1000000 + i.
 

@@ -366,18 +366,18 @@ class Densified:
         return f"Densified({self.cost!r}, factor={self.factor})"
 
 
-class _ScaleGradient(torch.autograd.Function):
-    """Identity forward; the backward multiplies the gradient by a per-axis weight."""
+class _MapGradient(torch.autograd.Function):
+    """Identity forward; the backward passes the positions' gradient through `map_gradient` (the metric push
+    reweights its axes, the turned push rotates it), so a cost's value stays and only its push changes."""
 
     @staticmethod
-    def forward(ctx, positions, weight):
-        ctx.save_for_backward(weight)
+    def forward(ctx, positions, map_gradient):
+        ctx.map_gradient = map_gradient
         return positions.view_as(positions)
 
     @staticmethod
     def backward(ctx, grad):
-        (weight,) = ctx.saved_tensors
-        return grad * weight, None
+        return ctx.map_gradient(grad), None
 
 
 class MetricGradient:
@@ -408,7 +408,8 @@ class MetricGradient:
         return self.cost.clearance(positions)
 
     def __call__(self, positions):
-        return self.cost(_ScaleGradient.apply(positions, self.weight.to(positions)))
+        weight = self.weight.to(positions)
+        return self.cost(_MapGradient.apply(positions, lambda grad: grad * weight))
 
     def __repr__(self):
         return f"MetricGradient({self.cost!r}, weight={self.weight.tolist()})"
@@ -449,22 +450,13 @@ class AnchoredPath:
         return f"AnchoredPath({self.cost!r}, start={self.start.tolist()})"
 
 
-class _TurnGradient(torch.autograd.Function):
-    """Identity forward; backward turns each position's horizontal gradient by its row's angle (rad, about +z)."""
-
-    @staticmethod
-    def forward(ctx, positions, angle):
-        ctx.save_for_backward(angle)
-        return positions.view_as(positions)
-
-    @staticmethod
-    def backward(ctx, grad):
-        (angle,) = ctx.saved_tensors
-        cos, sin = torch.cos(angle).to(grad)[:, None], torch.sin(angle).to(grad)[:, None]
-        turned = grad.clone()
-        turned[..., 0] = cos * grad[..., 0] - sin * grad[..., 1]
-        turned[..., 1] = sin * grad[..., 0] + cos * grad[..., 1]
-        return turned, None
+def _turn_horizontal(grad: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
+    """(B, T, 3) gradients with each row's horizontal part turned by its (B,) angle (rad, about +z)."""
+    cos, sin = torch.cos(angle).to(grad)[:, None], torch.sin(angle).to(grad)[:, None]
+    turned = grad.clone()
+    turned[..., 0] = cos * grad[..., 0] - sin * grad[..., 1]
+    turned[..., 1] = sin * grad[..., 0] + cos * grad[..., 1]
+    return turned
 
 
 def obstacle_axis_xy(obstacle) -> torch.Tensor | None:
@@ -517,7 +509,8 @@ class TurnedPush:
     def __call__(self, positions: torch.Tensor) -> torch.Tensor:
         if self.angle == 0.0:
             return self.cost(positions)
-        return self.cost(_TurnGradient.apply(positions, self.turns(positions)))
+        angle = self.turns(positions)
+        return self.cost(_MapGradient.apply(positions, lambda grad: _turn_horizontal(grad, angle)))
 
     def __repr__(self):
         return f"TurnedPush({self.cost!r}, angle={self.angle:.3f})"
@@ -682,11 +675,10 @@ def obstacle_guidance_cost(obstacles: Sequence[PositionCost], *, body: tuple[np.
             None: the waypoints alone (the paper's).
         turn: radians each obstacle's push is turned round it (`TurnedPush`; needs `start`); 0: straight away.
     """
-    bare = list(obstacles)
+    axes = [obstacle_axis_xy(obstacle) for obstacle in obstacles] if turn > 0 and start is not None else None
     if body is not None:
         obstacles = [SweptBody(obstacle, *body) for obstacle in obstacles]
-    if turn > 0 and start is not None:
-        axes = [obstacle_axis_xy(obstacle) for obstacle in bare]
+    if axes is not None:
         obstacles = [cost if axis is None else TurnedPush(cost, axis, start, turn)
                      for cost, axis in zip(obstacles, axes, strict=True)]
     cost: PositionCost = ObstacleSet(list(obstacles))

@@ -12,10 +12,12 @@ Per task, the policy packaged for it (`lano3dp eval --task T` without --checkpoi
                   object's diameter round the EE point, waypoints only
         default   the project's: A_0|k, the policy's DDIM, every step guided, rho 0.04 m per guided step
                   (`MetricGradient`), segments densified x4, the hand and the held object as a swept body, the
-                  path costed from the hand (`AnchoredPath`) and pushed clear after sampling (`push_clear`)
+                  path costed from the hand (`AnchoredPath`) and pushed clear after sampling (`push_clear`);
+                  where the checkpoint carries the guidance it was tuned with (its guidance.json), that
         sphere    the default with the previous body model (a ball of the held object's diameter round the EE)
-        turned    the default with each obstacle's push turned 60 degrees round it (`TurnedPush`)
+        turned    the recommended preset with each obstacle's push turned 60 degrees round it (`TurnedPush`)
         turned_half   turned, with half the push (rho 0.02)
+  The samplers other than default and sphere are fixed forms: a checkpoint's tuning does not change them.
   - and, with the default and both turned samplers (and none beside them), the harder rows of
     `--extra-variations`: a box, a cluster of two, two obstacles, one that moves (re-fitted before every chunk).
 Obstacle episodes use the first seeds from 1000000 whose layout has room for the obstacles (chosen from the
@@ -52,13 +54,14 @@ ROOT = Path(__file__).resolve().parent.parent
 SAMPLERS = {
     "none": {"guidance": "none"},
     "A_k": {"guidance": {"mode": "noisy", "anchored": False, "repair_steps": 0, "hold_unclear": False,
-                         "push_turn": 0.0}},
+                         "push_turn": 0.0, "tuned": False}},
     "paper": {"guidance": asdict(GUIDANCE_PRESETS["paper"]), "scheduler": "ddpm", "steps": 100,
               "obstacle": {"body": "sphere"}},
     "default": {"guidance": "clean"},
     "sphere": {"guidance": "clean", "obstacle": {"body": "sphere"}},  # the default before the swept body: its ablation
-    "turned": {"guidance": {"mode": "clean", "push_turn": 60.0}},  # the default with each push turned round
-    "turned_half": {"guidance": {"mode": "clean", "push_turn": 60.0, "rho": 0.02}},  # ... and half the push
+    # the recommended preset with each push turned round, and that with half the push
+    "turned": {"guidance": {"mode": "clean", "push_turn": 60.0, "tuned": False}},
+    "turned_half": {"guidance": {"mode": "clean", "push_turn": 60.0, "rho": 0.02, "tuned": False}},
 }
 # the harder rows compare the project's own guidance with none, not prior work's forms
 EXTRA_SAMPLERS = ("none", "default", "turned", "turned_half")
@@ -116,7 +119,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def row(summary: dict, episodes: list[dict], clean: dict | None) -> dict:
+def row(summary: dict, episodes: list[dict], tuning: dict, clean: dict | None) -> dict:
     low, high = wilson_interval(summary["successes"], summary["episodes"])
     classes = Counter(c for c in map(failure_class, episodes) if c is not None)
     contact_steps = [e["n_collision_steps"] for e in episodes]
@@ -130,6 +133,7 @@ def row(summary: dict, episodes: list[dict], clean: dict | None) -> dict:
         "mean_path_length": summary["mean_path_length"], "latency_mean_s": summary["latency_mean_s"],
         "failure_classes": {c: classes.get(c, 0) for c in FAILURE_CLASSES},
         "stage_rates": summary["stage_rates"], "seeds": [e["seed"] for e in episodes],
+        "guidance_tuning": tuning,  # what of the guidance the checkpoint's tuning set
     }
     if clean is not None:
         entry["clean_success_rate"] = clean["success_rate"]
@@ -154,7 +158,7 @@ def main(argv=None) -> int:
     def log(message: str) -> None:
         print(f"[{time.perf_counter() - started:7.0f}s] {message}", flush=True)
 
-    def evaluate(task: str, variation: str, name: str, sampler: str) -> tuple[dict, list[dict]] | None:
+    def evaluate(task: str, variation: str, name: str, sampler: str) -> tuple[dict, list[dict], dict] | None:
         out = work / task / f"{name}.json"
         options = dict(SAMPLERS[sampler])
         obstacle = {**options.pop("obstacle", {}), "refit": "moving" in variation}
@@ -170,7 +174,7 @@ def main(argv=None) -> int:
         else:
             log(f"{task} / {variation} / {sampler}")
             result = eval_stage(config, log=log, command=command)
-        return result["summary"], result["episodes"]
+        return result["summary"], result["episodes"], result.get("guidance_tuning") or {}
 
     results: dict = {"command": command, "config": vars(args), "samplers": SAMPLERS, "policies": policies, "tasks": {},
                      "machine": {"platform": platform.platform(), "python": platform.python_version(),
@@ -231,6 +235,11 @@ def markdown_report(results: dict) -> str:
                           r["mean_contact_steps"],
                           None if r["mean_min_clearance"] is None else f"{100 * r['mean_min_clearance']:.1f} cm",
                           None if r["latency_mean_s"] is None else f"{1000 * r['latency_mean_s']:.0f} ms"])
+        tuned = {r["sampler"]: r["guidance_tuning"] for r in entry["rows"].values() if r.get("guidance_tuning")}
+        for sampler, tuning in tuned.items():
+            lines += [f"Sampler {sampler} here takes the guidance this checkpoint was tuned with (its "
+                      f"guidance.json): " + ", ".join(f"{name} {value}" for name, value in tuning.items()) + ".",
+                      ""]
         if table:
             lines += [markdown_table(["variation", "sampler", "episodes w/ obstacle", "success", "ratio to clean",
                                       "touch", "contact steps", "clearance", "latency/chunk"], table), ""]

@@ -28,7 +28,7 @@ def test_a_row_counts_classes_and_reads_success_against_the_clean_one():
     summary = {"episodes": 4, "successes": 2, "episodes_with_obstacles": 4, "success_rate": 0.5,
                "collision_rate": 0.25, "mean_collision_steps": 0.25, "mean_min_clearance": 0.02,
                "worst_min_clearance": -0.01, "mean_path_length": 1.0, "latency_mean_s": 0.1, "stage_rates": {}}
-    row = bench.row(summary, episodes, {"success_rate": 0.8})
+    row = bench.row(summary, episodes, {"push_turn": 60.0}, {"success_rate": 0.8})
     assert row["ratio_to_clean"] == 0.625 and row["seeds"] == [1, 2, 3, 4]
     assert row["failure_classes"]["grasp missed"] == 1 and row["failure_classes"]["touched the obstacle"] == 1
     assert sum(row["failure_classes"].values()) == 2
@@ -40,3 +40,5 @@ def test_a_row_counts_classes_and_reads_success_against_the_clean_one():
                                             "obstacle/default": {"variation": "obstacle", "sampler": "default",
                                                                  **row}}}}})
     assert "| obstacle | default | 4 | 50%" in report and "grasp missed" in report
+    assert "Sampler default here takes the guidance this checkpoint was tuned with (its guidance.json): " \
+           "push_turn 60.0." in report

@@ -29,7 +29,8 @@ GUIDANCE_OPTIONS = {"--guidance": "mode", "--rho": "rho", "--last-steps": "last_
                     "--per-train-step": "per_train_step", "--guided-clip-range": "guided_clip_range",
                     "--push-weight": "push_weight", "--checked": "checked", "--guide-when-needed": "guide_when_needed",
                     "--anchored/--no-anchored": "anchored", "--repair-steps": "repair_steps",
-                    "--hold-unclear/--no-hold-unclear": "hold_unclear", "--push-turn": "push_turn"}
+                    "--hold-unclear/--no-hold-unclear": "hold_unclear", "--push-turn": "push_turn",
+                    "--checkpoint-guidance/--no-checkpoint-guidance": "tuned"}
 
 
 def _value(text: str):
@@ -63,7 +64,8 @@ def readme_defaults() -> dict[str, tuple[list, list]]:
 
 def test_the_readme_table_states_every_guidance_setting():
     assert set(GUIDANCE_OPTIONS) <= set(readme_defaults())
-    assert set(GUIDANCE_OPTIONS.values()) == {f.name for f in fields(GuidanceSettings)}
+    # `keep` is no setting: the command line fills it with the options given
+    assert set(GUIDANCE_OPTIONS.values()) == {f.name for f in fields(GuidanceSettings)} - {"keep"}
 
 
 def test_the_readme_guidance_defaults_are_the_presets():
@@ -141,11 +143,13 @@ def test_eval_and_run_options_map_onto_the_nested_settings(captured, tmp_path):
     runner.invoke(app, ["run", "pour the bowl into the pan", "--out", str(tmp_path / "run"), *OPTIONS])
     assert [type(c) for c in captured] == [EvalConfig, RunConfig]
     for config in captured:
-        # the paper preset, with the given options over it
+        # the paper preset, with the given options over it, kept over a checkpoint's tuning
         assert config.guidance == GuidanceSettings(mode="clean", rho=2.0, last_steps=10, metric_gradient=False,
                                                    densify=1, guided_clip_range=3.0, push_weight="alpha_bar",
                                                    checked=True, anchored=True, repair_steps=5, hold_unclear=True,
-                                                   push_turn=30.0)
+                                                   push_turn=30.0, tuned=False, keep=config.guidance.keep)
+        assert set(config.guidance.keep) == {"rho", "guided_clip_range", "push_weight", "checked", "anchored",
+                                             "repair_steps", "hold_unclear", "push_turn"}
         assert config.obstacle == ObstacleSettings(shape="box", margin=0.03, body="sphere", held_radius=0.05,
                                                    refit=True)
         assert config.perception == PerceptionSettings(image_size=96)

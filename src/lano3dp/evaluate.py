@@ -22,7 +22,8 @@ ground-truth masks by default ("sim"), or the paper's open-vocabulary detector +
 named by the phrases the scene uses (e.g. "blue bowl" among look-alikes) and obstacles, by default, are the
 objects the scene marks as obstacles. Crop box and image size follow the dataset the checkpoint was
 trained on (found through its train_config.json) and points per cloud follow the policy's config, so
-evaluation sees what training saw.
+evaluation sees what training saw. A guided evaluation uses the guidance the checkpoint was tuned with, where it
+has a `guidance.json` (`tuned_config`); the results' config is what ran.
 """
 
 from __future__ import annotations
@@ -44,7 +45,12 @@ import numpy as np
 
 from lano3dp import env_factory
 from lano3dp.errors import Lano3dpError
-from lano3dp.guidance.settings import GUIDANCE_PRESETS, GuidanceSettings, ObstacleSettings  # noqa: F401 (re-export)
+from lano3dp.guidance.settings import (  # noqa: F401 (GUIDANCE_PRESETS: re-export)
+    GUIDANCE_PRESETS,
+    GuidanceSettings,
+    ObstacleSettings,
+    load_guidance_tuning,
+)
 from lano3dp.jsonio import to_jsonable, write_json, write_text_atomic
 from lano3dp.video import write_video
 
@@ -268,6 +274,19 @@ def check_task_matches_policy(task: str, policy_config) -> None:
             f"{policy_config.extra.get('task') or trained_skill}")
 
 
+def tuned_config(config, checkpoint: str | Path):
+    """`config` (an EvalConfig or RunConfig) with the guidance `checkpoint` was tuned with laid over its own
+    (`GuidanceSettings.tuned_for`): what an evaluation runs and records."""
+    from lano3dp.policy.modeling import resolve_checkpoint
+
+    try:
+        folder = resolve_checkpoint(checkpoint)
+    except FileNotFoundError:  # loading the policy says so, with what was expected there
+        return config
+    guidance = config.guidance.tuned_for(load_guidance_tuning(folder))
+    return config if guidance == config.guidance else replace(config, guidance=guidance)
+
+
 def runtime_config(config: EvalConfig, seed: int, step_limit: float | None = None):
     """The runner's config for one episode of this evaluation (`step_limit`: the env's `max_ee_step`)."""
     from lano3dp.runtime import RuntimeConfig
@@ -288,7 +307,7 @@ class EpisodeRunner:
         from lano3dp.perception import ObjectObserver
         from lano3dp.policy import DiffusionPolicy
 
-        self.config = config
+        self.config = config = tuned_config(config, config.checkpoint)
         self.runner_class = runner_class
         self.policy = DiffusionPolicy.from_pretrained(config.checkpoint)
         settings = dataset_settings(config.checkpoint)
@@ -478,18 +497,24 @@ FLAT_EVAL_FIELDS = {
 EVAL_FIELDS_BEFORE = {"body": "sphere"}
 # ... and the same for fields added to a settings section (every guided result before them ran without).
 SECTION_FIELDS_BEFORE = {"guidance": {"anchored": False, "repair_steps": 0, "hold_unclear": False,
-                                       "push_turn": 0.0}}
+                                       "push_turn": 0.0, "tuned": False}}
+# Guidance fields that say how the settings were chosen, not what ran: a saved config has the tuning laid over it.
+GUIDANCE_CHOICE_FIELDS = ("tuned", "keep")
 EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
 
 
 def measured_config(config: Mapping[str, Any]) -> dict[str, Any]:
-    """A nested EvalConfig dict as far as it changes the episodes: the worker count never does, and an unguided
+    """A nested EvalConfig dict (with its checkpoint's tuning laid over it, `tuned_config`) as far as it changes
+    the episodes: the worker count never does, nor how the guidance settings were chosen, and an unguided
     evaluation without checked execution never reads the other guidance settings, so results made under other
     guidance defaults stay current."""
     measured = {name: value for name, value in config.items() if name not in EVAL_FIELDS_NOT_MEASURED}
     guidance = measured.get("guidance")
-    if isinstance(guidance, Mapping) and guidance.get("mode") == "none" and not guidance.get("checked"):
-        measured["guidance"] = {"mode": "none", "checked": False}
+    if isinstance(guidance, Mapping):
+        guidance = measured["guidance"] = {name: value for name, value in guidance.items()
+                                           if name not in GUIDANCE_CHOICE_FIELDS}
+        if guidance.get("mode") == "none" and not guidance.get("checked"):
+            measured["guidance"] = {"mode": "none", "checked": False}
     return measured
 
 
@@ -664,6 +689,7 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
     checkpoint = resolve_checkpoint(config.checkpoint)
+    config = tuned_config(config, checkpoint)
     if config.out and Path(config.out).is_dir():  # Path("") is ".", a folder: out=None must pass
         raise IsADirectoryError(f"--out {config.out} is a folder; give the results JSON file to write")
     log = EpisodeLog(episode_log_path(config.out), evaluation_identity(config, checkpoint)) if config.out else None
@@ -717,6 +743,7 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
         "command": command if command is not None else shlex.join(["lano3dp", *sys.argv[1:]]),
         "config": asdict(config),
         "checkpoint": str(checkpoint),
+        "guidance_tuning": config.guidance.tuning_taken(load_guidance_tuning(checkpoint)),  # the checkpoint's choice
         "policy": load_config(checkpoint / "config.json").to_dict(),
         "summary": summary,
         "episodes": episodes,
@@ -821,6 +848,7 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     from lano3dp.language import OfflineDecomposer, SkillRegistry, UnknownObjectError
     from lano3dp.perception import ObjectObserver
     from lano3dp.policy import DiffusionPolicy
+    from lano3dp.policy.modeling import resolve_checkpoint
     from lano3dp.policy.pretrained import packaged_checkpoint, packaged_checkpoints
     from lano3dp.report import plot_top_view
     from lano3dp.runtime import PolicyRunner, RuntimeConfig, observe, rollout
@@ -842,6 +870,9 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
         checkpoint = packaged_checkpoint(plan.skill)
         log(f"policy: the one packaged for {plan.skill} ({checkpoint.name})")
     policy = DiffusionPolicy.from_pretrained(checkpoint)
+    if taken := config.guidance.tuning_taken(load_guidance_tuning(resolve_checkpoint(checkpoint))):
+        log("guidance: as this policy was tuned: " + ", ".join(f"{name} {value}" for name, value in taken.items()))
+        config = tuned_config(config, checkpoint)
     settings = dataset_settings(checkpoint)
     task = config.task or plan.skill
     check_env_task(task, policy.config, config.env)

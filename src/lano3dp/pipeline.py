@@ -175,12 +175,13 @@ def _weights_newer_than(checkpoint: str, results: Path) -> bool:
 def cached_eval(config) -> dict[str, Any] | None:
     """The results in `config.out` if they were made with this EvalConfig (up to the worker count) and the
     checkpoint's weights are not newer than them, else None. The weights matter because a folder can be
-    re-written in place (a re-packaged policy keeps its path): its old results would otherwise be reused."""
-    from lano3dp.evaluate import measured_config, saved_config
+    re-written in place (a re-packaged policy keeps its path): its old results would otherwise be reused. The
+    guidance compared is what runs: with the checkpoint's tuning laid over it (`evaluate.tuned_config`)."""
+    from lano3dp.evaluate import measured_config, saved_config, tuned_config
 
     if config.out and Path(config.out).exists() and not _weights_newer_than(config.checkpoint, Path(config.out)):
         previous = json.loads(Path(config.out).read_text())
-        wanted = measured_config(json.loads(json.dumps(asdict(config))))
+        wanted = measured_config(json.loads(json.dumps(asdict(tuned_config(config, config.checkpoint)))))
         # results saved before a field existed were made with its default (e.g. segmenter "sim"), and flat ones
         # (saved before the settings were nested) are read into their sections
         made = measured_config(saved_config(previous.get("config") or {}))

@@ -15,6 +15,7 @@ from lano3dp.guidance.settings import (
     GUIDANCE_MODES,
     GUIDANCE_PRESETS,
     PUSH_WEIGHTS,
+    TUNABLE_FIELDS,
     GuidanceSettings,
     ObstacleSettings,
 )
@@ -215,6 +216,10 @@ PUSH_TURN = typer.Option(None, "--push-turn", min=0.0, max=89.9,
                          help="Degrees to turn each obstacle's push round it, towards the side the chunk already "
                               "passes, so a chunk headed straight at it goes round rather than back (0: straight "
                               f"away; needs --anchored; default: {_preset_values('push_turn')}).")
+TUNED = typer.Option(None, "--checkpoint-guidance/--no-checkpoint-guidance",
+                     help="Take the guidance the checkpoint was tuned with (its guidance.json) for every guidance "
+                          "option not given here, or keep the preset's (default: "
+                          f"{_preset_values('tuned')}).")
 HOLD_UNCLEAR = typer.Option(None, "--hold-unclear/--no-hold-unclear",
                             help="Execute only the start of a guided chunk predicted to keep half the margin, "
                                  "holding still when none does, and re-plan (default: "
@@ -238,13 +243,15 @@ IMAGE_SIZE = typer.Option(None, "--image-size", min=16, help="Camera resolution 
 
 
 def guidance_settings(mode: str, preset: str, **overrides) -> GuidanceSettings:
-    """--guidance and --guidance-preset, with the guidance options that were given (not None) overriding it."""
+    """--guidance and --guidance-preset, with the guidance options that were given (not None) overriding it and
+    kept over the checkpoint's tuning."""
     choice(mode, GUIDANCE_MODES, "--guidance")
     choice(preset, tuple(GUIDANCE_PRESETS), "--guidance-preset")
     choice(overrides.get("push_weight"), PUSH_WEIGHTS, "--push-weight")
+    given = {name: value for name, value in overrides.items() if value is not None}
     try:
-        return replace(GUIDANCE_PRESETS[preset], mode=mode,
-                       **{name: value for name, value in overrides.items() if value is not None})
+        return replace(GUIDANCE_PRESETS[preset], mode=mode, **given,
+                       keep=tuple(name for name in given if name in TUNABLE_FIELDS))
     except ValueError as error:
         raise typer.BadParameter(str(error), param_hint="--guidance") from None
 
@@ -273,7 +280,7 @@ GUIDANCE_OVERRIDES = {"rho": "rho", "last_steps": "last_steps", "metric_gradient
                       "guided_clip_range": "guided_clip_range", "push_weight": "push_weight", "checked": "checked",
                       "guide_when_needed": "guide_when_needed", "anchored": "anchored",
                       "repair_steps": "repair_steps", "hold_unclear": "hold_unclear",
-                      "push_turn": "push_turn"}
+                      "push_turn": "push_turn", "tuned": "checkpoint_guidance"}
 
 
 def episode_settings(params: Mapping[str, Any]) -> tuple[GuidanceSettings, ObstacleSettings, PerceptionSettings]:

@@ -39,6 +39,7 @@ def eval_command(
     repair_steps: int = _options.REPAIR_STEPS,
     hold_unclear: bool = _options.HOLD_UNCLEAR,
     push_turn: float = _options.PUSH_TURN,
+    checkpoint_guidance: bool = _options.TUNED,
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
     obstacle_shape: str = _options.OBSTACLE_SHAPE,
@@ -67,7 +68,7 @@ def eval_command(
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     from lano3dp.cli import _options
-    from lano3dp.evaluate import EvalConfig, episode_log_path, evaluate
+    from lano3dp.evaluate import EvalConfig, episode_log_path, evaluate, tuned_config
     from lano3dp.policy.pretrained import packaged_checkpoint
 
     console = Console(stderr=True)
@@ -86,10 +87,13 @@ def eval_command(
         perception=perception, scheduler=scheduler, steps=steps, obstacle_scenes_only=obstacle_scenes_only,
         max_steps=max_steps, workers=workers, video_dir=str(video_dir) if video_dir else None, n_videos=n_videos,
         seed=seed, out=str(out), env=env)
+    ran = tuned_config(config, checkpoint).guidance
     console.print(f"[bold]eval[/bold] {checkpoint} on {task or '(dataset task)'} / {variation}"
                   + (f" in {env}" if env else "") + f": {episodes} episodes, guidance {guidance}"
-                  + (f" ({guidance_preset}) rho={guidance_settings.rho:g} S={guidance_settings.last_steps}"
-                     if guidance_settings.guided else "")
+                  + (f" ({guidance_preset}{', as the checkpoint was tuned' if ran != config.guidance else ''}) "
+                     f"rho={ran.rho:g} S={ran.last_steps}" + (f" push turn {ran.push_turn:g} deg" if ran.push_turn
+                                                               else "")
+                     if ran.guided else "")
                   + f", {workers} worker(s)")
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   TextColumn("{task.fields[status]}"), console=console) as bar:

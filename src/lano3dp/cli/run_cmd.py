@@ -36,6 +36,7 @@ def run_command(
     repair_steps: int = _options.REPAIR_STEPS,
     hold_unclear: bool = _options.HOLD_UNCLEAR,
     push_turn: float = _options.PUSH_TURN,
+    checkpoint_guidance: bool = _options.TUNED,
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
     obstacle_shape: str = _options.OBSTACLE_SHAPE,

@@ -23,7 +23,7 @@ _EXPORTS = {
     "ObstacleShape": "shapes", "UnknownObstacleShapeError": "shapes", "get_obstacle_shape": "shapes",
     "obstacle_shape_names": "shapes", "register_obstacle_shape": "shapes", "unregister_obstacle_shape": "shapes",
     "GUIDANCE_PRESETS": "settings", "GuidanceSettings": "settings", "ObstacleSettings": "settings",
-    "SAFETY_MARGIN": "settings",
+    "SAFETY_MARGIN": "settings", "load_guidance_tuning": "settings", "save_guidance_tuning": "settings",
 }
 
 __all__ = [
@@ -32,7 +32,8 @@ __all__ = [
     "GuidanceError", "GuidanceMode", "GuidanceSettings", "MetricGradient", "Obstacle", "ObstacleSet",
     "ObstacleModel", "ObstacleSettings", "ObstacleShape", "OrientedBox", "PointCloudObstacle", "PositionCost",
     "Sphere", "SweptBody", "TurnedPush", "UnknownObstacleShapeError", "checked_sample",
-    "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "min_clearance", "obstacle_guidance_cost",
+    "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "load_guidance_tuning", "min_clearance",
+    "obstacle_guidance_cost", "save_guidance_tuning",
     "obstacle_shape_names", "push_clear", "clear_prefix", "reached_positions",
     "register_obstacle_shape", "unregister_obstacle_shape",
 ]
@@ -64,7 +65,14 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
     from lano3dp.guidance.fitting import fit_box, fit_cylinder
     from lano3dp.guidance.obstacle_model import ObstacleModel
     from lano3dp.guidance.sampler import DenoiseStep, GuidanceConfig, GuidanceMode, denoise
-    from lano3dp.guidance.settings import GUIDANCE_PRESETS, SAFETY_MARGIN, GuidanceSettings, ObstacleSettings
+    from lano3dp.guidance.settings import (
+        GUIDANCE_PRESETS,
+        SAFETY_MARGIN,
+        GuidanceSettings,
+        ObstacleSettings,
+        load_guidance_tuning,
+        save_guidance_tuning,
+    )
     from lano3dp.guidance.shapes import (
         ObstacleShape,
         UnknownObstacleShapeError,

@@ -4,6 +4,9 @@
                        checked execution. Its defaults are the recommended preset, GUIDANCE_PRESETS["recommended"].
     ObstacleSettings   how an obstacle's points become a cost: the fitted shape, the body kept clear, the margin.
     SAFETY_MARGIN      the 2 cm beyond contact at which every obstacle cost starts pushing.
+    load_guidance_tuning / save_guidance_tuning
+                       the guidance a checkpoint was tuned with (its `guidance.json`), which
+                       `GuidanceSettings.tuned_for` lays over the recommended preset.
 
 `evaluate.EvalConfig` and `RunConfig` nest these (and save them verbatim in results); `runtime.RuntimeConfig.
 from_settings` turns them into what the runner executes, and `RuntimeConfig`'s own defaults are read from here,
@@ -14,8 +17,15 @@ This module imports neither torch nor the sampler, so the command line can read 
 
 from __future__ import annotations
 
+import json
 import math
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
+from pathlib import Path
+from typing import Any
+
+from lano3dp.errors import CorruptFileError
+from lano3dp.jsonio import write_json
 
 # Metres beyond contact at which an obstacle cost starts pushing (part of Q*).
 SAFETY_MARGIN = 0.02
@@ -65,6 +75,10 @@ class GuidanceSettings:
         push_turn: degrees by which each obstacle's push is turned round it, towards the side the chunk already
             passes (`guidance.TurnedPush`; needs `anchored`; 0: straight away from it, the paper's): a chunk
             headed straight at an obstacle is then carried round it instead of back.
+        tuned: take the settings the checkpoint was tuned with (its `guidance.json`, see `tuned_for`) for
+            every field not in `keep` (the paper preset: off, its form is fixed).
+        keep: fields the user chose, which a checkpoint's tuning leaves as they are (the command line fills it
+            with the guidance options given).
     """
 
     mode: str = "clean"
@@ -81,8 +95,14 @@ class GuidanceSettings:
     repair_steps: int = 20
     hold_unclear: bool = True
     push_turn: float = 0.0
+    tuned: bool = True
+    keep: tuple[str, ...] = ()
 
     def __post_init__(self):
+        object.__setattr__(self, "keep", tuple(self.keep))  # a saved config holds a list
+        if unknown := sorted(set(self.keep) - set(TUNABLE_FIELDS)):
+            raise ValueError(f"keep names no tunable guidance setting: {', '.join(unknown)} (tunable: "
+                             f"{', '.join(TUNABLE_FIELDS)})")
         if self.mode not in GUIDANCE_MODES:
             raise ValueError(f"guidance must be 'none', 'noisy' or 'clean', got {self.mode!r}")
         if self.rho < 0 or self.last_steps < 0:
@@ -102,6 +122,59 @@ class GuidanceSettings:
     def guided(self) -> bool:
         return self.mode != "none"
 
+    def tuning_taken(self, tuning: Mapping[str, Any]) -> dict[str, Any]:
+        """What of a checkpoint's tuning (`load_guidance_tuning`) these settings take: every field not in `keep`,
+        none when `tuned` is off or the mode unguided."""
+        if not (self.tuned and self.guided):
+            return {}
+        return {name: value for name, value in tuning.items() if name not in self.keep}
+
+    def tuned_for(self, tuning: Mapping[str, Any]) -> GuidanceSettings:
+        """These settings with what they take of a checkpoint's tuning laid over them (applying it twice changes
+        nothing more)."""
+        taken = self.tuning_taken(tuning)
+        return replace(self, **taken) if taken else self
+
+
+# The settings a checkpoint's tuning may set: how a chunk is guided, not whether (mode) or the tuning's own switches.
+TUNABLE_FIELDS = tuple(f.name for f in fields(GuidanceSettings) if f.name not in ("mode", "tuned", "keep"))
+GUIDANCE_TUNING_NAME = "guidance.json"
+GUIDANCE_TUNING_FORMAT = "lano3dp-guidance-tuning"
+
+
+def load_guidance_tuning(checkpoint: str | Path) -> dict[str, Any]:
+    """The guidance settings a policy folder was tuned with ({} when it has no `guidance.json`).
+
+    Tuning belongs to the weights it was measured with: re-packaging a policy (`export_fp16`) does not carry it.
+    A file that is not JSON, or names a setting that is not tunable or a value out of range, fails here with
+    its path, before any episode runs."""
+    path = Path(checkpoint) / GUIDANCE_TUNING_NAME
+    if not path.exists():
+        return {}
+    try:
+        data = json.loads(path.read_text())
+        settings = data["settings"]
+        if data.get("format") != GUIDANCE_TUNING_FORMAT or not isinstance(settings, dict):
+            raise ValueError(f"not a {GUIDANCE_TUNING_FORMAT} file")
+        if unknown := sorted(set(settings) - set(TUNABLE_FIELDS)):
+            raise ValueError(f"{', '.join(unknown)} cannot be tuned (tunable: {', '.join(TUNABLE_FIELDS)})")
+        GuidanceSettings(**settings)  # the values' own checks
+    except (ValueError, KeyError, TypeError) as error:
+        raise CorruptFileError(path, f"not a guidance tuning ({error}); fix or delete it to use the recommended "
+                                     "guidance") from None
+    return dict(settings)
+
+
+def save_guidance_tuning(checkpoint: str | Path, settings: Mapping[str, Any], measured: str) -> Path:
+    """Write the guidance `checkpoint` was tuned with (atomically), with `measured`: where the tuning was chosen
+    and confirmed (results files and commands), which travels with it."""
+    unknown = sorted(set(settings) - set(TUNABLE_FIELDS))
+    if unknown:
+        raise ValueError(f"{', '.join(unknown)} cannot be tuned (tunable: {', '.join(TUNABLE_FIELDS)})")
+    GuidanceSettings(**settings)
+    return write_json(Path(checkpoint) / GUIDANCE_TUNING_NAME,
+                      {"format": GUIDANCE_TUNING_FORMAT, "settings": dict(settings), "measured": measured})
+
 
 GUIDANCE_PRESETS: dict[str, GuidanceSettings] = {
     "recommended": GuidanceSettings(),
@@ -110,7 +183,7 @@ GUIDANCE_PRESETS: dict[str, GuidanceSettings] = {
     # between them did not). The paper also sampled with DDPM-100 and kept a ball of the held object's diameter
     # clear: add scheduler "ddpm", steps 100 and ObstacleSettings(body="sphere").
     "paper": GuidanceSettings(rho=4.0, last_steps=10, metric_gradient=False, densify=1, anchored=False,
-                              repair_steps=0, hold_unclear=False, push_turn=0.0),
+                              repair_steps=0, hold_unclear=False, push_turn=0.0, tuned=False),
 }
 
 

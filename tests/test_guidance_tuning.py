@@ -100,3 +100,15 @@ def test_lano3dp_eval_takes_the_tuning_under_the_options_given(tuned_checkpoint,
     assert result.exit_code == 0, result.output + repr(result.exception)
     data = json.loads(untuned.read_text())
     assert data["config"]["guidance"]["push_turn"] == 0.0 and data["guidance_tuning"] == {}
+
+
+def test_lano3dp_run_says_it_takes_the_tuning_and_records_what_ran(tuned_checkpoint, tmp_path):
+    from lano3dp.cli import app
+
+    out = tmp_path / "run"
+    result = CliRunner().invoke(app, ["run", "open the drawer", "--checkpoint", str(tuned_checkpoint),
+                                      "--max-steps", "2", "--image-size", "32", "--out", str(out)])
+    assert result.exit_code == 0, result.output + repr(result.exception)
+    assert "guidance: as this policy was tuned: push_turn 60.0, rho 0.02" in result.output
+    guidance = json.loads((out / "run.json").read_text())["config"]["guidance"]
+    assert (guidance["push_turn"], guidance["rho"]) == (60.0, 0.02)

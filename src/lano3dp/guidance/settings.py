@@ -156,22 +156,23 @@ def load_guidance_tuning(checkpoint: str | Path) -> dict[str, Any]:
         settings = data["settings"]
         if data.get("format") != GUIDANCE_TUNING_FORMAT or not isinstance(settings, dict):
             raise ValueError(f"not a {GUIDANCE_TUNING_FORMAT} file")
-        if unknown := sorted(set(settings) - set(TUNABLE_FIELDS)):
-            raise ValueError(f"{', '.join(unknown)} cannot be tuned (tunable: {', '.join(TUNABLE_FIELDS)})")
-        GuidanceSettings(**settings)  # the values' own checks
+        _check_tuning(settings)
     except (ValueError, KeyError, TypeError) as error:
         raise CorruptFileError(path, f"not a guidance tuning ({error}); fix or delete it to use the recommended "
                                      "guidance") from None
     return dict(settings)
 
 
+def _check_tuning(settings: Mapping[str, Any]) -> None:
+    if unknown := sorted(set(settings) - set(TUNABLE_FIELDS)):
+        raise ValueError(f"{', '.join(unknown)} cannot be tuned (tunable: {', '.join(TUNABLE_FIELDS)})")
+    GuidanceSettings(**settings)  # the values' own checks
+
+
 def save_guidance_tuning(checkpoint: str | Path, settings: Mapping[str, Any], measured: str) -> Path:
     """Write the guidance `checkpoint` was tuned with (atomically), with `measured`: where the tuning was chosen
     and confirmed (results files and commands), which travels with it."""
-    unknown = sorted(set(settings) - set(TUNABLE_FIELDS))
-    if unknown:
-        raise ValueError(f"{', '.join(unknown)} cannot be tuned (tunable: {', '.join(TUNABLE_FIELDS)})")
-    GuidanceSettings(**settings)
+    _check_tuning(settings)
     return write_json(Path(checkpoint) / GUIDANCE_TUNING_NAME,
                       {"format": GUIDANCE_TUNING_FORMAT, "settings": dict(settings), "measured": measured})
 

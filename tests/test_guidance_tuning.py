@@ -112,3 +112,17 @@ def test_lano3dp_run_says_it_takes_the_tuning_and_records_what_ran(tuned_checkpo
     assert "guidance: as this policy was tuned: push_turn 60.0, rho 0.02" in result.output
     guidance = json.loads((out / "run.json").read_text())["config"]["guidance"]
     assert (guidance["push_turn"], guidance["rho"]) == (60.0, 0.02)
+
+
+def test_a_tuned_turn_without_the_anchored_path_is_named_as_doing_nothing(tuned_checkpoint, tmp_path):
+    from lano3dp.cli import app
+
+    assert GuidanceSettings(push_turn=30.0).ineffective() == []
+    assert GuidanceSettings(mode="none", push_turn=30.0, anchored=False).ineffective() == []
+    (note,) = GuidanceSettings(push_turn=30.0, anchored=False).ineffective()
+    assert note.startswith("push_turn 30 has no effect without anchored")
+    result = CliRunner().invoke(app, ["eval", "--checkpoint", str(tuned_checkpoint), "--task", "open_drawer",
+                                      "--guidance", "clean", "--no-anchored", "--episodes", "1", "--max-steps", "2",
+                                      "--out", str(tmp_path / "r.json")])
+    assert result.exit_code == 0, result.output + repr(result.exception)
+    assert "push_turn 60 has no effect without anchored" in " ".join(result.output.split())

@@ -873,6 +873,8 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
     if taken := config.guidance.tuning_taken(load_guidance_tuning(resolve_checkpoint(checkpoint))):
         log("guidance: as this policy was tuned: " + ", ".join(f"{name} {value}" for name, value in taken.items()))
         config = tuned_config(config, checkpoint)
+    for note in config.guidance.ineffective():
+        log(f"note: {note}")
     settings = dataset_settings(checkpoint)
     task = config.task or plan.skill
     check_env_task(task, policy.config, config.env)

@@ -95,6 +95,8 @@ def eval_command(
                                                                else "")
                      if ran.guided else "")
                   + f", {workers} worker(s)")
+    for note in ran.ineffective():
+        console.print(f"[yellow]note:[/yellow] {note}")
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   TextColumn("{task.fields[status]}"), console=console) as bar:
         handle = bar.add_task("episodes", total=episodes, status="")

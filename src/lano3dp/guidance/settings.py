@@ -122,6 +122,13 @@ class GuidanceSettings:
     def guided(self) -> bool:
         return self.mode != "none"
 
+    def ineffective(self) -> list[str]:
+        """Notes for the user on settings that change nothing in this combination."""
+        if self.guided and self.push_turn and not self.anchored:
+            return [f"push_turn {self.push_turn:g} has no effect without anchored (--anchored): the turn needs the "
+                    "hand's position"]
+        return []
+
     def tuning_taken(self, tuning: Mapping[str, Any]) -> dict[str, Any]:
         """What of a checkpoint's tuning (`load_guidance_tuning`) these settings take: every field not in `keep`,
         none when `tuned` is off or the mode unguided."""

@@ -4,31 +4,26 @@ for every option the user did not give, evaluation and `run` record what ran, an
 from __future__ import annotations
 
 import json
+import shutil
 from dataclasses import asdict
 
 import pytest
-import torch
 from typer.testing import CliRunner
 
 from lano3dp.errors import CorruptFileError
 from lano3dp.evaluate import EvalConfig, RunConfig, runtime_config, tuned_config
 from lano3dp.guidance import GUIDANCE_PRESETS, GuidanceSettings, load_guidance_tuning, save_guidance_tuning
 from lano3dp.pipeline import cached_eval
-from test_policy import TINY, stats_for
+from test_stages import tiny_checkpoint  # noqa: F401 (a fixture: the policy tuned_checkpoint copies)
 
 TUNING = {"push_turn": 60.0, "rho": 0.02}
 
 
 @pytest.fixture(scope="module")
-def tuned_checkpoint(tmp_path_factory):
-    """An untrained tiny open_drawer policy whose folder says it was tuned with TUNING."""
-    from lano3dp.policy import DiffusionPolicy, PolicyConfig
-
-    torch.manual_seed(0)
-    policy = DiffusionPolicy(PolicyConfig(**({"object_names": ("drawer",)} | TINY)))
-    policy.set_normalizer(stats_for(policy.config))
+def tuned_checkpoint(tiny_checkpoint, tmp_path_factory):  # noqa: F811 (the imported fixture, requested)
+    """test_stages' untrained tiny open_drawer policy, in a folder that says it was tuned with TUNING."""
     folder = tmp_path_factory.mktemp("tuned") / "policy"
-    policy.save_pretrained(folder)
+    shutil.copytree(tiny_checkpoint, folder)
     save_guidance_tuning(folder, TUNING, measured="tests/test_guidance_tuning.py")
     return folder
 

@@ -12,8 +12,8 @@ Per task, the policy packaged for it (`lano3dp eval --task T` without --checkpoi
                   object's diameter round the EE point, waypoints only
         default   the project's: A_0|k, the policy's DDIM, every step guided, rho 0.04 m per guided step
                   (`MetricGradient`), segments densified x4, the hand and the held object as a swept body, the
-                  path costed from the hand (`AnchoredPath`) and pushed clear after sampling (`push_clear`);
-                  where the checkpoint carries the guidance it was tuned with (its guidance.json), that
+                  path costed from the hand (`AnchoredPath`) and pushed clear after sampling (`push_clear`),
+                  with the guidance the checkpoint was tuned with laid over it where it has a guidance.json
         sphere    the default with the previous body model (a ball of the held object's diameter round the EE)
         turned    the recommended preset with each obstacle's push turned 60 degrees round it (`TurnedPush`)
         turned_half   turned, with half the push (rho 0.02)

@@ -20,8 +20,8 @@ Per task, the policy packaged for it (`lano3dp eval --task T` without --checkpoi
   The samplers other than default and sphere are fixed forms: a checkpoint's tuning does not change them.
   - and, with the default and both turned samplers (and none beside them), the harder rows of
     `--extra-variations`: a box, a cluster of two, two obstacles, one that moves (re-fitted before every chunk).
-Obstacle episodes use the first seeds from 1000000 whose layout has room for the obstacles (chosen from the
-layout alone: `EvalConfig.obstacle_scenes_only`), clean ones 1000000 + i.
+Obstacle episodes use the first seeds from --seed (1000000) whose layout has room for the obstacles (chosen from
+the layout alone: `EvalConfig.obstacle_scenes_only`), clean ones --seed + i.
 
 Every failed episode is classified from its stages and contacts (`failure_class`). Evaluations are cached
 in --work, keyed by their configuration (a re-run only adds what is missing; delete a JSON after changing
@@ -211,12 +211,13 @@ def _interval(values) -> str:
 
 
 def markdown_report(results: dict) -> str:
+    seed = results.get("config", {}).get("seed", 1_000_000)
     lines = ["# Obstacle avoidance that keeps the task", "", f"Command: `{results['command']}`", "",
              "Policies: " + (", ".join(f"{t}: `{p}`" for t, p in results["policies"].items()) + "; others: " if
                              results["policies"] else "") +
              "the packaged ones (`src/lano3dp/checkpoints/<task>`, training seed 0, see their "
-             "record.json). Obstacle rows: the first seeds from 1000000 whose layout has room for the obstacles; "
-             "clean: seeds 1000000 + i. Intervals: 95% Wilson. touch = any contact of hand or held object with "
+             f"record.json). Obstacle rows: the first seeds from {seed} whose layout has room for the obstacles; "
+             f"clean: seeds {seed} + i. Intervals: 95% Wilson. touch = any contact of hand or held object with "
              "an obstacle; contact steps = steps with contact (mean over episodes); clearance = the simulator's "
              "smallest gap (m), mean over episodes; ratio = success / the same policy's clean success.", "",
              "Samplers: " + "; ".join(f"**{name}** {options}" for name, options in results["samplers"].items()), ""]

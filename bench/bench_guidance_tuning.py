@@ -81,8 +81,8 @@ def main(argv=None) -> int:
                                 seed=TUNING_SEED, obstacle_scenes_only=True, workers=args.workers,
                                 guidance={"mode": "clean", **settings, "tuned": False},
                                 out=str(work / task / f"{name}.json"))
-            summary = eval_stage(config, command=command)["summary"]
-            touches = round(summary["collision_rate"] * summary["episodes"])
+            result = eval_stage(config, command=command)
+            summary, touches = result["summary"], sum(bool(e["collided"]) for e in result["episodes"])
             scores[name] = {"episodes": summary["episodes"], "successes": summary["successes"], "touches": touches,
                             "success_interval": list(wilson_interval(summary["successes"], summary["episodes"])),
                             "stage_rates": summary["stage_rates"]}

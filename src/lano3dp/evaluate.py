@@ -689,7 +689,8 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
     checkpoint = resolve_checkpoint(config.checkpoint)
-    config = tuned_config(config, checkpoint)
+    tuning = load_guidance_tuning(checkpoint)
+    config = replace(config, guidance=config.guidance.tuned_for(tuning))
     if config.out and Path(config.out).is_dir():  # Path("") is ".", a folder: out=None must pass
         raise IsADirectoryError(f"--out {config.out} is a folder; give the results JSON file to write")
     log = EpisodeLog(episode_log_path(config.out), evaluation_identity(config, checkpoint)) if config.out else None
@@ -743,7 +744,7 @@ def _evaluate(config: EvalConfig, progress, command) -> dict[str, Any]:
         "command": command if command is not None else shlex.join(["lano3dp", *sys.argv[1:]]),
         "config": asdict(config),
         "checkpoint": str(checkpoint),
-        "guidance_tuning": config.guidance.tuning_taken(load_guidance_tuning(checkpoint)),  # the checkpoint's choice
+        "guidance_tuning": config.guidance.tuning_taken(tuning),  # what of config.guidance the checkpoint chose
         "policy": load_config(checkpoint / "config.json").to_dict(),
         "summary": summary,
         "episodes": episodes,
@@ -870,9 +871,10 @@ def _run_instruction(config: RunConfig, log: Callable[[str], None], command: str
         checkpoint = packaged_checkpoint(plan.skill)
         log(f"policy: the one packaged for {plan.skill} ({checkpoint.name})")
     policy = DiffusionPolicy.from_pretrained(checkpoint)
-    if taken := config.guidance.tuning_taken(load_guidance_tuning(resolve_checkpoint(checkpoint))):
+    tuning = load_guidance_tuning(resolve_checkpoint(checkpoint))
+    if taken := config.guidance.tuning_taken(tuning):
         log("guidance: as this policy was tuned: " + ", ".join(f"{name} {value}" for name, value in taken.items()))
-        config = tuned_config(config, checkpoint)
+        config = replace(config, guidance=config.guidance.tuned_for(tuning))
     for note in config.guidance.ineffective():
         log(f"note: {note}")
     settings = dataset_settings(checkpoint)

@@ -4,8 +4,9 @@ For each task, each candidate below guides the packaged policy on the first --ep
 3000000 (scenes `bench_obstacles` never uses: its table starts at 1000000, the held-out clean scenes at 2000000).
 The rule, fixed before the tuning scenes were widened from 50 to 100 (and before those runs): the candidate with
 the most successes among those touching the obstacle in at most 5% of episodes; ties go to the recommended
-preset. `--write` saves the winner into the packaged folder (nothing when the recommended preset wins, and an
-earlier file is then removed).
+preset. `--write` saves the winner into the evaluated folder (nothing when the recommended preset wins, and an
+earlier file is then removed): the packaged one, or the policy folder `--policy TASK=PATH` names (a candidate
+exported with `lano3dp.policy.pretrained.export_fp16`, tuned before it is shipped).
 
     recommended   the recommended preset (`GuidanceSettings()`)
     turned        each obstacle's push turned 60 degrees round it (`TurnedPush`)
@@ -51,7 +52,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--work", default="bench/out/guidance_tuning")
     parser.add_argument("--tag", default="")
-    parser.add_argument("--write", action="store_true", help="save each task's winner into its packaged folder")
+    parser.add_argument("--policy", action="append", default=[], metavar="TASK=PATH",
+                        help="tune this policy folder for TASK instead of the packaged policy")
+    parser.add_argument("--write", action="store_true", help="save each task's winner into the folder evaluated")
     return parser.parse_args(argv)
 
 
@@ -71,8 +74,9 @@ def main(argv=None) -> int:
     results: dict = {"command": command, "config": vars(args), "candidates": CANDIDATES, "tuning_seed": TUNING_SEED,
                      "rule": "most successes among candidates touching in at most 5% of episodes; ties to the "
                              "recommended preset", "tasks": {}}
+    policies = {task: Path(path) for task, path in (item.split("=", 1) for item in args.policy)}
     for task in tasks:
-        checkpoint = packaged_checkpoint(task)
+        checkpoint = policies.get(task) or packaged_checkpoint(task)
         scores = {}
         for name, settings in CANDIDATES.items():
             print(f"[{time.perf_counter() - started:6.0f}s] {task} / {name}", flush=True)

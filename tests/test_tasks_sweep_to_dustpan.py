@@ -8,7 +8,7 @@ import pytest
 
 from lano3dp.geometry.rotations import rot6d_to_matrix
 from lano3dp.sim.experts import OPEN
-from lano3dp.sim.objects.articulated import DustpanParts
+from lano3dp.sim.objects.articulated import BroomParts, DustpanParts
 from lano3dp.sim.robot import TOP_DOWN
 from lano3dp.sim.tasks.sweep_to_dustpan import DIRT_HALF, MIN_SWEPT, N_DIRT
 from test_tasks_common import make_env, teleport
@@ -55,16 +55,21 @@ def test_expert_sweeps_holding_the_broom(env):
     assert env.task.is_success(env.sim, env.episode.layout)
 
 
-def test_expert_grasps_the_handle_nearest_the_hands_start_yaw():
-    """Both grasps across the handle need the same carry turn; the expert must not pick the mirrored one
-    (half a wrist turn more) at random, or the demonstrations disagree on where the hand goes."""
+def test_expert_holds_the_head_on_the_same_side_of_the_hand():
+    """Of the two symmetric grasps across the handle the expert takes the one with the head along the hand's +x,
+    whichever way the broom lies, so every demonstration sweeps with the hand turned to the sweep direction."""
     env = make_env("sweep_to_dustpan")
     try:
         for seed in range(12):
             env.reset(seed=seed)
+            layout = env.episode.layout
+            broom = env.sim.body_rotation(BroomParts.of(layout.names["broom"], layout.objects["broom"].scale).body)
             actions = env.expert_plan().actions()
             grasp = actions[int(np.argmax(actions[:, 9] > OPEN)) - 1]
-            relative = rot6d_to_matrix(grasp[3:9]) @ TOP_DOWN.T  # rot_z(yaw) for a top-down hand
-            assert abs(np.arctan2(relative[1, 0], relative[0, 0])) <= np.pi / 2 + 1e-6, seed
+            head_in_hand = rot6d_to_matrix(grasp[3:9]).T @ broom[:, 0]
+            assert head_in_hand[0] > 0.99, seed
+            sweep = rot6d_to_matrix(actions[-1, 3:9]) @ TOP_DOWN.T  # rot_z(yaw) for a top-down hand
+            angle = layout.params["sweep_angle"]
+            assert np.allclose(sweep[:2, 0], [np.cos(angle), np.sin(angle)], atol=1e-3), seed
     finally:
         env.close()

@@ -9,7 +9,7 @@ side of the table at any yaw. Instance variation: broom and dustpan scaled 0.8 /
 recoloured, the broom never larger than the dustpan (its head must fit the mouth).
 
 Expert: top-down grasp of the handle at the broom's centre of mass (fingers across the handle,
-tips 2 mm above the table; of the two such grasps, the one nearest the hand's start yaw), lift
+tips 2 mm above the table; of the two such grasps, the one with the head along the hand's +x), lift
 6 cm, turn and carry the broom until its head is behind the dirt with the handle along v, lower
 the head to 2 mm above the table, push along v until the head is 3.5 cm short of the dustpan's
 back wall, lift the broom (still held).
@@ -43,7 +43,6 @@ from lano3dp.sim.tasks.base import (
     Task,
     segment_distance,
 )
-from lano3dp.sim.tasks.close_microwave import yaw_along
 from lano3dp.sim.tasks.open_drawer import close_gently
 from lano3dp.sim.variations import Variation
 
@@ -154,10 +153,11 @@ class SweepToDustpan(Task):
         grasp = broom_pose[:3, :3] @ np.array([parts.grasp_x, 0.0, 0.0]) + broom_pose[:3, 3]
         grasp[2] = GRASP_TCP_HEIGHT
         target_rotation = rot_z(angle)  # the broom's heading while sweeping: its +x along v
-        # The fingers are symmetric, so the two grasps across the handle need the same carry turn; take
-        # the one nearest the hand's start yaw. Choosing by the carry turn tied, and floating-point noise
-        # picked the mirrored grasp (half a wrist turn more) in about one demonstration in five.
-        ee = pose(top_down(yaw_along(broom_pose[:3, 1], previous=0.0)), grasp)
+        # Of the two grasps across the handle, the one that holds the head on the hand's +x side: the carry
+        # then turns the hand to the sweep direction whichever way the broom lay, so which end is the head
+        # is read once, off the broom lying on the table. With the grasp nearest the hand's start yaw the
+        # carry's turn hung on which side of the hand the head was, and policies swept reversed (README).
+        ee = pose(top_down(float(np.arctan2(broom_pose[1, 0], broom_pose[0, 0]))), grasp)
         in_hand = np.linalg.inv(ee) @ broom_pose  # broom in the EE frame, fixed once grasped
 
         def ee_for_head(head: np.ndarray) -> np.ndarray:

@@ -1,4 +1,8 @@
-"""The per-policy guidance tuning's rule and report, on synthetic scores (no simulation)."""
+"""The per-policy guidance tuning: its rule, report and --policy (synthetic scores, no simulation)."""
+
+import json
+
+import pytest
 
 from bench_loader import load_bench
 
@@ -23,3 +27,26 @@ def test_the_report_marks_the_chosen_candidate():
                                         "scores": scores(recommended=(50, 0), turned=(70, 2)), "chosen": "turned"}}})
     assert "| bowl_pour | **turned** | 70/100 (10%–90%) | 2/100 |" in report
     assert "| bowl_pour | recommended | 50/100" in report
+
+
+def test_a_policy_given_is_tuned_and_its_winner_written_into_its_own_folder(tmp_path, monkeypatch):
+    """--policy TASK=PATH evaluates that folder, not the packaged one, and --write saves the winner beside it."""
+    folder = tmp_path / "candidate"
+    folder.mkdir()
+    evaluated = []
+
+    def fake_eval_stage(config, command=None):
+        evaluated.append(config.checkpoint)
+        guidance = config.guidance  # turned wins: 8 against 5 (preset) and 7 (turned_half, rho 0.02)
+        successes = 5 + 3 * (guidance.push_turn == 60.0) - (guidance.rho == 0.02)
+        return {"summary": {"episodes": 10, "successes": successes, "stage_rates": {}},
+                "episodes": [{"collided": False}] * 10}
+
+    monkeypatch.setattr(bench, "eval_stage", fake_eval_stage)
+    monkeypatch.setattr(bench, "packaged_checkpoint", lambda task: pytest.fail("the packaged policy was used"))
+    monkeypatch.setattr(bench, "ROOT", tmp_path)
+    (tmp_path / "results").mkdir()
+    bench.main(["--tasks", "bowl_pour", "--policy", f"bowl_pour={folder}", "--episodes", "10", "--work",
+                str(tmp_path / "work"), "--write"])
+    assert set(evaluated) == {str(folder)}
+    assert json.loads((folder / "guidance.json").read_text())["settings"] == {"push_turn": 60.0}

@@ -61,7 +61,7 @@ from lano3dp.errors import Lano3dpError
 from lano3dp.geometry.frame import observe
 
 SEED_STRIDE = 100_003  # fallback seeds of episode i: seed + i + k * SEED_STRIDE (k = 0, 1, ...)
-MAX_TRIES = 10         # seeds tried per episode before giving up (wide DART noise fails the bottle expert ~45%)
+MAX_TRIES = 10         # seeds tried per episode before giving up (under 4 cm DART noise the bottle expert fails ~45%)
 # Workspace crop for clouds (world frame, metres): the table area up to 0.6 m high.
 CROP_LOW = (0.0, -0.6, -0.02)
 CROP_HIGH = (0.95, 0.6, 0.6)

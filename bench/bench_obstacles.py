@@ -65,8 +65,20 @@ SAMPLERS = {
 }
 # the harder rows compare the project's own guidance with none, not prior work's forms
 EXTRA_SAMPLERS = ("none", "default", "turned", "turned_half")
-FAILURE_CLASSES = ("target not seen", "touched the obstacle", "grasp missed", "lost on the carry",
+FAILURE_CLASSES = ("target not seen", "touched the obstacle", "path blocked", "grasp missed", "lost on the carry",
                    "last stage unfinished", "other")
+# a hand held this many steps in a row has spent a sixth of an episode or more waiting for a way round
+PATH_BLOCKED_STEPS = 20
+
+
+def held_still_steps(episode: dict) -> int:
+    """The longest run of steps the runtime held the hand because no start of a chunk kept clear (each such chunk
+    executes one step of holding; `RuntimeConfig.hold_unclear`)."""
+    longest = run = 0
+    for executed in episode.get("chunk_executed") or ():
+        run = run + 1 if executed == 0 else 0
+        longest = max(longest, run)
+    return longest
 
 
 def failure_class(episode: dict) -> str | None:
@@ -74,6 +86,7 @@ def failure_class(episode: dict) -> str | None:
 
     target not seen: perception found no target (e.g. the obstacle hid it in the first frame);
     touched the obstacle: a failure with contact (the path was blocked or the detour too narrow);
+    path blocked: held still for PATH_BLOCKED_STEPS steps in a row or more, no chunk finding a clear way round;
     grasp missed: a task with a "grasped" stage that never got there (e.g. pushed off by the guidance);
     lost on the carry: grasped, but never reached the stage before the last (e.g. the pan, the drawer):
         the detour left the demonstrations' states, or was too wide to come back;
@@ -86,6 +99,8 @@ def failure_class(episode: dict) -> str | None:
         return "target not seen"
     if episode["collided"]:
         return "touched the obstacle"
+    if held_still_steps(episode) >= PATH_BLOCKED_STEPS:
+        return "path blocked"
     stages = list((episode.get("stages") or {}).items())
     if not stages:
         return "other"

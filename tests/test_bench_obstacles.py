@@ -17,6 +17,10 @@ def test_every_failure_gets_the_class_its_stages_and_contacts_say():
     assert bench.failure_class(episode(error="ObjectNotFoundError: object 'block' was not found")) == "target not seen"
     assert bench.failure_class(episode(collided=True, reached=3)) == "touched the obstacle"
     assert bench.failure_class(episode(reached=1)) == "grasp missed"
+    held = [None, 0, *[0] * (bench.PATH_BLOCKED_STEPS - 1), 2]
+    assert bench.failure_class({**episode(reached=1), "chunk_executed": held}) == "path blocked"
+    assert bench.failure_class({**episode(reached=1), "chunk_executed": held[:-2]}) == "grasp missed"
+    assert bench.failure_class({**episode(success=True, reached=5), "chunk_executed": held}) is None
     assert bench.failure_class(episode(reached=3)) == "lost on the carry"
     assert bench.failure_class(episode(reached=4)) == "last stage unfinished"
     assert bench.failure_class({**episode(), "stages": {}}) == "other"

@@ -50,13 +50,15 @@ from lano3dp.policy.pretrained import packaged_checkpoint
 from lano3dp.report import markdown_table, percent, wilson_interval
 
 ROOT = Path(__file__).resolve().parent.parent
+# the obstacle handling of prior work and the paper: neither walls gaps nor lets a hand inside the margin escape
+PRIOR_OBSTACLE = {"bridge_gaps": False, "escape_when_inside": False}
 # EvalConfig fields of each sampler; a guidance mode alone is the recommended preset in that mode
 SAMPLERS = {
     "none": {"guidance": "none"},
     "A_k": {"guidance": {"mode": "noisy", "anchored": False, "repair_steps": 0, "hold_unclear": False,
-                         "push_turn": 0.0, "tuned": False}},
+                         "push_turn": 0.0, "tuned": False}, "obstacle": PRIOR_OBSTACLE},
     "paper": {"guidance": asdict(GUIDANCE_PRESETS["paper"]), "scheduler": "ddpm", "steps": 100,
-              "obstacle": {"body": "sphere"}},
+              "obstacle": {"body": "sphere", **PRIOR_OBSTACLE}},
     "default": {"guidance": "clean"},
     "sphere": {"guidance": "clean", "obstacle": {"body": "sphere"}},  # the default before the swept body: its ablation
     # the recommended preset with each push turned round, and that with half the push

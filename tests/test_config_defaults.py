@@ -134,7 +134,8 @@ OPTIONS = ["--guidance", "clean", "--guidance-preset", "paper", "--rho", "2", "-
            "--push-weight", "alpha_bar", "--checked", "--anchored", "--repair-steps", "5", "--hold-unclear",
            "--push-turn", "30",
            "--margin", "0.03", "--body", "sphere", "--held-radius", "0.05",
-           "--refit-obstacles", "--obstacle-shape", "box", "--image-size", "96"]
+           "--refit-obstacles", "--no-bridge-gaps", "--no-escape-inside", "--obstacle-shape", "box",
+           "--image-size", "96"]
 
 
 def test_eval_and_run_options_map_onto_the_nested_settings(captured, tmp_path):
@@ -151,7 +152,7 @@ def test_eval_and_run_options_map_onto_the_nested_settings(captured, tmp_path):
         assert set(config.guidance.keep) == {"rho", "guided_clip_range", "push_weight", "checked", "anchored",
                                              "repair_steps", "hold_unclear", "push_turn"}
         assert config.obstacle == ObstacleSettings(shape="box", margin=0.03, body="sphere", held_radius=0.05,
-                                                   refit=True)
+                                                   refit=True, bridge_gaps=False, escape_when_inside=False)
         assert config.perception == PerceptionSettings(image_size=96)
 
 

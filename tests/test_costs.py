@@ -21,7 +21,7 @@ from lano3dp.guidance.costs import (
     obstacle_axis_xy,
     obstacle_guidance_cost,
 )
-from lano3dp.guidance.fitting import fit_box, fit_cylinder
+from lano3dp.guidance.fitting import bridge_narrow_gaps, fit_box, fit_cylinder
 
 
 def pts(*xyz):
@@ -299,10 +299,12 @@ def test_turned_push_turns_the_gradient_round_the_obstacle_and_keeps_the_cost():
     assert -other[0, 1, 1] > 0  # an obstacle on the right is passed on the left
 
 
-def _descend_to_goal(cost, goal: torch.Tensor, steps: int = 400) -> torch.Tensor:
+def _descend_to_goal(cost, goal: torch.Tensor, steps: int = 400, keep_path: bool = False) -> torch.Tensor:
     """A point pulled 1 cm a step towards `goal` and pushed 1.5 cm a step by `cost`: a policy's pull and the
-    guidance's push on one waypoint, as the chunk is re-planned from wherever the hand got."""
+    guidance's push on one waypoint, as the chunk is re-planned from wherever the hand got. Its last position,
+    or with `keep_path` every one (steps, 3)."""
     position = torch.tensor([[[0.0, 0.0, 0.2]]], dtype=torch.float64)
+    path = []
     for _ in range(steps):
         variable = position.clone().requires_grad_(True)
         (gradient,) = torch.autograd.grad(cost(variable).sum(), variable)
@@ -310,7 +312,8 @@ def _descend_to_goal(cost, goal: torch.Tensor, steps: int = 400) -> torch.Tensor
         push = -gradient / gradient.norm().clamp_min(1e-12) * (gradient.norm() > 0)
         position = position + 0.01 * pull / pull.norm().clamp_min(1e-12) + 0.015 * push
         position[..., 2] = 0.2
-    return position[0, 0]
+        path.append(position[0, 0])
+    return torch.stack(path) if keep_path else position[0, 0]
 
 
 def test_a_head_on_path_goes_round_with_the_turned_push_and_stalls_without():
@@ -328,3 +331,39 @@ def test_a_head_on_path_goes_round_with_the_turned_push_and_stalls_without():
             return obstacle_guidance_cost([cylinder], start=start, turn=turn)(path)
         reached = _descend_to_goal(cost, goal)
         assert float((reached - goal).norm()) < 0.02, turn
+
+
+def test_a_wall_bridges_only_a_gap_too_narrow_to_pass_and_stays_inside_the_pair():
+    left, right = Cylinder((0.5, 0.045), 0.03), Cylinder((0.5, -0.03), 0.02)  # 2.5 cm apart
+    far = Cylinder((0.9, 0.0), 0.03)
+    (wall,) = bridge_narrow_gaps([left, right, far], passable=0.04)
+    assert bridge_narrow_gaps([left, right], passable=0.024) == []  # passable: left open
+    corners = torch.as_tensor(wall.corners_xy())
+    inside = [min(float((corner - o.center).norm()) - o.radius for o in (left, right)) for corner in corners]
+    assert max(inside) <= 1e-9  # every corner within one of the pair: the wall fills the gap, nothing else
+    middle = torch.tensor([[0.5, 0.0025, 0.3]], dtype=torch.float64)
+    assert float(wall.surface_distance(middle)) < 0 < float(ObstacleSet([left, right]).clearance(middle[None]))
+    low = Cylinder((0.5, 0.1), 0.03, xy_only=False, z_min=0.0, z_max=0.1)  # may be passed over: not bridged
+    assert bridge_narrow_gaps([left, low], passable=0.1) == []
+
+
+def test_with_a_wall_across_a_narrow_gap_the_turned_push_goes_round_the_pair_not_through_it():
+    # two obstacles 3 cm apart dead ahead: in the gap their turned pushes cancel sideways, so the path heads
+    # through it (where the runtime holds a hand that cannot pass); the wall's push carries it round the pair
+    pair = [Cylinder((0.5, 0.045), 0.03, margin=0.02), Cylinder((0.5, -0.045), 0.03, margin=0.02)]
+    goal = torch.tensor([1.0, 0.0, 0.2], dtype=torch.float64)
+
+    def turned(obstacles):
+        def cost(position):
+            path = torch.cat([position, goal.reshape(1, 1, 3)], 1)
+            start = position[0, 0].detach().numpy()
+            return obstacle_guidance_cost(obstacles, start=start, turn=math.radians(60))(path)
+        return cost
+
+    crossings = []
+    for obstacles in (pair, pair + bridge_narrow_gaps(pair, passable=2 * 0.02)):
+        path = _descend_to_goal(turned(obstacles), goal, keep_path=True)
+        assert float((path[-1] - goal).norm()) < 0.02
+        crossings.append(float(path[int(torch.nonzero(path[:, 0] >= 0.5)[0]), 1]))
+    assert abs(crossings[0]) < 0.015  # through the gap
+    assert abs(crossings[1]) > 0.045 + 0.03  # beyond either obstacle

@@ -542,3 +542,28 @@ def test_guide_when_needed_keeps_the_policys_own_chunk_while_it_clears_the_obsta
                                                                    obstacle_phrases=["obstacle_0"]), seed=0)
     assert not blocked.collided and blocked.min_clearance > 0  # guided where the own chunk would hit
     assert any(call["guidance"] is guidance for call in policy.calls) and 2 in blocked.chunk_tries
+
+
+def test_a_hand_already_inside_the_margin_may_move_away_but_not_closer_when_escape_is_on(observer):
+    # a moving obstacle came within a millimetre of the hand: holding still there lets it walk into the hand
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    obs, _ = env.reset(seed=0)
+    frame, state = observe(env, obs)
+    state = state.copy()
+    kept = {}
+    for escape in (False, True):
+        model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02, escape_when_inside=escape)
+        runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=model), obstacle_phrases=["obstacle_0"])
+        runner.update_obstacles(frame, state)
+        (cylinder,) = runner.obstacles
+        axis = cylinder.center.numpy()
+        state[:3] = [axis[0] - cylinder.safety_distance + 0.019, axis[1], 0.25]  # 1 mm from the held sphere
+        for name, step in (("away", -0.01), ("closer", 0.01)):
+            waypoints = np.array([[state[0] + step * i, state[1], 0.25] for i in range(1, 5)])
+            actions = torch.cat([torch.as_tensor(waypoints, dtype=torch.float32),
+                                 torch.as_tensor(ROT6D).expand(4, 6), torch.ones(4, 1)], -1)[None]
+            cost = runner.executed_path_cost(state, actions[0])
+            assert cost.present_clearance() < model.margin / 2
+            kept[escape, name] = runner.cut_to_clear(actions, state, cost).shape[1]
+    assert kept[False, "away"] == kept[False, "closer"] == 0  # held still either way
+    assert kept[True, "away"] == 4 and kept[True, "closer"] == 0

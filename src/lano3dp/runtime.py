@@ -55,7 +55,7 @@ from lano3dp.guidance.costs import (
     obstacle_guidance_cost,
     push_clear,
 )
-from lano3dp.guidance.fitting import fit_cylinder
+from lano3dp.guidance.fitting import bridge_narrow_gaps, fit_cylinder
 from lano3dp.guidance.obstacle_model import ObstacleModel  # re-exported: configs and tests build it from here
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
 from lano3dp.guidance.settings import GUIDANCE_PRESETS, GuidanceSettings, ObstacleSettings
@@ -167,7 +167,9 @@ class RuntimeConfig:
         return cls(guidance=sampler, scheduler=scheduler, num_inference_steps=num_inference_steps,
                    n_action_steps=n_action_steps,
                    obstacle=ObstacleModel(shape=obstacle.shape, margin=obstacle.margin, body=obstacle.body,
-                                          held_radius=obstacle.held_radius, refit_every_chunk=obstacle.refit),
+                                          held_radius=obstacle.held_radius, refit_every_chunk=obstacle.refit,
+                                          bridge_gaps=obstacle.bridge_gaps,
+                                          escape_when_inside=obstacle.escape_when_inside),
                    checked=checked, metric_gradient=guidance.metric_gradient, densify=guidance.densify,
                    guide_when_needed=guidance.guide_when_needed, anchored=guidance.anchored,
                    repair_steps=guidance.repair_steps, hold_unclear=guidance.hold_unclear,
@@ -292,6 +294,7 @@ class PolicyRunner:
         self.chunks: list[ChunkRecord] = []
         self.obstacle_cost: PositionCost | None = None
         self.obstacles: ObstacleSet | None = None
+        self.gap_walls: list[PositionCost] = []  # walls across gaps too narrow to pass (ObstacleModel.bridge_gaps)
         self.held_radius: float | None = None
         self.step_count = 0
         self.held_clouds = 0  # frames in which a hidden target kept its previous cloud
@@ -314,6 +317,7 @@ class PolicyRunner:
         self.chunks = []
         self.obstacle_cost = None
         self.obstacles = None
+        self.gap_walls = []
         self.held_radius = None
         self.step_count = 0
         self.held_clouds = 0
@@ -344,6 +348,7 @@ class PolicyRunner:
             self.held_object = held_object or None
         self.obstacle_cost = None
         self.obstacles = None
+        self.gap_walls = []
 
     # ---- observations ------------------------------------------------------------------------
     def _default_visual(self, frame: RGBDFrame) -> np.ndarray:
@@ -453,14 +458,21 @@ class PolicyRunner:
                 self.obstacle_cost = None
             except (PerceptionError, EmptyCloudError):
                 self.stale_obstacle_fits += 1  # the arm hides it now: keep the last fit
+        if self.obstacle_cost is None:
+            self.gap_walls = bridge_narrow_gaps(list(self.obstacles), model.passable_gap(self.held_radius or 0.0)) \
+                if model.bridge_gaps else []
         if self.obstacle_cost is None or model.body == "swept" or self.config.anchored:
             self.obstacle_cost = self.guidance_cost(frame, np.asarray(state, dtype=np.float32))
+
+    def guided_obstacles(self) -> list[PositionCost]:
+        """The fitted obstacles and the walls across gaps too narrow to pass (`ObstacleModel.bridge_gaps`)."""
+        return list(self.obstacles) + self.gap_walls
 
     def guidance_cost(self, frame: RGBDFrame, state: np.ndarray) -> PositionCost:
         """The cost guidance descends for the next chunk: the fitted obstacles against the body model."""
         body = self.swept_body(frame, state) if self.config.obstacle.body == "swept" else None
         metric_scale = self.policy.normalizer.scale("action")[:3] if self.config.metric_gradient else None
-        cost = obstacle_guidance_cost(list(self.obstacles), body=body, densify=self.config.densify,
+        cost = obstacle_guidance_cost(self.guided_obstacles(), body=body, densify=self.config.densify,
                                       action_scale=metric_scale, start=state[:3] if self.config.anchored else None,
                                       turn=math.radians(self.config.push_turn))
         if body is not None:
@@ -567,7 +579,7 @@ class PolicyRunner:
         else:  # the "sphere" body: the obstacles carry the held radius; one ball of radius 0 at the EE point
             node_offsets, radii = np.zeros((len(rotations), 1, 3)), np.zeros(1)
         step_limit = None if self.config.step_limit is None else self.config.step_limit * self.time_stride
-        return ExecutedPath(list(self.obstacles), state[:3], node_offsets, radii, step_limit=step_limit,
+        return ExecutedPath(self.guided_obstacles(), state[:3], node_offsets, radii, step_limit=step_limit,
                             densify=max(self.config.densify, 2), margin=model.margin)
 
     def push_chunk_clear(self, chunk: ActionChunk, start: int, cost: PositionCost) -> tuple[ActionChunk, int]:
@@ -587,7 +599,12 @@ class PolicyRunner:
         """The start of `actions` (B, T, 10) whose executed path keeps half the margin from every obstacle
         (`guidance.clear_prefix`); the last kept action may be moved part of the way to its waypoint."""
         start = torch.as_tensor(np.asarray(state[:3], dtype=np.float64))[None]
-        kept = clear_prefix(cost, actions[:, :, :3].double(), start, clearance=self.config.obstacle.margin / 2)
+        required = self.config.obstacle.margin / 2
+        if self.config.obstacle.escape_when_inside:
+            # a hand already inside (an obstacle moved at it, or a grasped object's ball appeared near one) may
+            # move where it gets no closer: holding still there let moving obstacles walk into it
+            required = min(required, cost.present_clearance())
+        kept = clear_prefix(cost, actions[:, :, :3].double(), start, clearance=required)
         if kept.shape[1] == actions.shape[1]:
             return actions
         cut = actions[:, :kept.shape[1]].clone()
@@ -638,6 +655,7 @@ class EpisodeResult:
         chunk_predicted_clearance: per chunk, the runner's own clearance estimate of the executed waypoints.
         ee_path: (steps + 1, 3) EE positions, metres (kept for plots; dropped from JSON by default).
         obstacles: the fitted obstacle shapes the runner guided against (see `describe_obstacle`).
+        gap_walls: walls across gaps too narrow to pass that it guided against too (`ObstacleModel.bridge_gaps`).
         held_radius: m, the held extent used in Q*.
         held_clouds: target clouds carried over from the previous frame because the target was hidden.
         partly_hidden: targets whose first-frame cloud came from the few points an obstacle left in view.
@@ -661,6 +679,7 @@ class EpisodeResult:
     chunk_predicted_clearance: list[float | None]
     ee_path: np.ndarray
     obstacles: list[dict[str, Any]] = field(default_factory=list)
+    gap_walls: list[dict[str, Any]] = field(default_factory=list)
     chunk_repaired: list[int] = field(default_factory=list)
     chunk_executed: list[int | None] = field(default_factory=list)
     held_radius: float | None = None
@@ -765,6 +784,7 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
         ee_path=ee_path,
         obstacles=([describe_obstacle(o, runner.config.obstacle.shape) for o in runner.obstacles]
                    if runner.obstacles is not None else []),
+        gap_walls=[describe_obstacle(wall, "box") for wall in runner.gap_walls],
         held_radius=runner.held_radius, held_clouds=runner.held_clouds, partly_hidden=list(runner.partly_hidden),
         targets=dict(runner.initial_targets), error=error,
         wall_s=time.perf_counter() - started,

@@ -47,6 +47,8 @@ def eval_command(
     body: str = _options.BODY,
     held_radius: float = _options.HELD_RADIUS,
     refit_obstacles: bool = _options.REFIT_OBSTACLES,
+    bridge_gaps: bool = _options.BRIDGE_GAPS,
+    escape_inside: bool = _options.ESCAPE_INSIDE,
     obstacle_scenes_only: bool = typer.Option(False, help="With an obstacle variation: the first --episodes seeds "
                                                           "whose scene has room for its obstacles."),
     max_steps: int = typer.Option(None, min=1, help="Episode step limit (default: the task's)."),

@@ -44,6 +44,8 @@ def run_command(
     body: str = _options.BODY,
     held_radius: float = _options.HELD_RADIUS,
     refit_obstacles: bool = _options.REFIT_OBSTACLES,
+    bridge_gaps: bool = _options.BRIDGE_GAPS,
+    escape_inside: bool = _options.ESCAPE_INSIDE,
     compare: bool = typer.Option(False, help="Also run the same scene without guidance (both paths in the plot)."),
     max_steps: int = typer.Option(None, help="Episode step limit (default: the task's)."),
     seed: int = typer.Option(1_000_000, help="Scene seed."),

@@ -590,6 +590,12 @@ class ExecutedPath:
         return [(obstacle.clearance(balls.flatten(1, 2)).reshape(balls.shape[:3]) - radii).min(-1).values
                 for obstacle in self.obstacles]
 
+    def present_clearance(self) -> float:
+        """The body's gap (m) at the hand's present pose, to the nearest obstacle (inf without obstacles)."""
+        with torch.no_grad():
+            gaps = self._gaps(self.start[None, None])
+        return min((float(gap[0, 0]) for gap in gaps), default=math.inf)
+
     def clearance(self, positions: torch.Tensor) -> torch.Tensor:
         """(B, T, 3) -> (B, T * densify): the smallest gap along the executed path, the hand's present pose
         excluded (no waypoint can change it)."""

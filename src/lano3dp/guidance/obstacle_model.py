@@ -39,6 +39,11 @@ class ObstacleModel:
         xy_only: measure distances in the horizontal plane only (the paper's setting).
         refit_every_chunk: re-segment and re-fit obstacles before every chunk (moving obstacles); by default
             they are fitted once, on the first frame of the episode, before the arm can occlude them.
+        bridge_gaps: guide against a wall across every gap between two obstacles too narrow for the body
+            (`passable_gap`; `guidance.bridge_narrow_gaps`), so the path goes round the pair, not at the gap.
+        escape_when_inside: where the hand already is closer to an obstacle than the runtime's hold keeps
+            (`RuntimeConfig.hold_unclear`), execute the start of a chunk that gets no closer, instead of holding
+            still while a moving obstacle walks into the hand.
     """
 
     shape: str = ObstacleSettings.shape
@@ -51,6 +56,8 @@ class ObstacleModel:
     hand_radius: float = 0.025
     xy_only: bool = True
     refit_every_chunk: bool = False
+    bridge_gaps: bool = ObstacleSettings.bridge_gaps
+    escape_when_inside: bool = ObstacleSettings.escape_when_inside
 
     def __post_init__(self):
         get_obstacle_shape(self.shape)  # an unknown name fails here, naming the registered ones
@@ -75,6 +82,13 @@ class ObstacleModel:
         count = 2 * int(np.ceil(reach / 0.02)) + 1
         along = np.linspace(-reach, reach, count)
         return along[:, None] * finger_axis, np.full(count, self.hand_radius)
+
+    def passable_gap(self, held_radius: float) -> float:
+        """The narrowest gap (m) between two obstacle surfaces the body can pass keeping the margin on both sides:
+        the hand's thickness (it can turn its long side along the gap) or, with the "sphere" body, the ball's
+        diameter."""
+        half = self.hand_radius if self.body == "swept" else held_radius
+        return 2 * (half + self.margin)
 
     def fit(self, points: np.ndarray, held_radius: float) -> PositionCost:
         """(N, 3) world-frame obstacle points -> a cost whose safety distance includes `held_radius` (m), fitted

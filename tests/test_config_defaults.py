@@ -30,6 +30,8 @@ GUIDANCE_OPTIONS = {"--guidance": "mode", "--rho": "rho", "--last-steps": "last_
                     "--push-weight": "push_weight", "--checked": "checked", "--guide-when-needed": "guide_when_needed",
                     "--anchored/--no-anchored": "anchored", "--repair-steps": "repair_steps",
                     "--hold-unclear/--no-hold-unclear": "hold_unclear", "--push-turn": "push_turn",
+                    "--bridge-gaps/--no-bridge-gaps": "bridge_gaps",
+                    "--escape-inside/--no-escape-inside": "escape_when_inside",
                     "--checkpoint-guidance/--no-checkpoint-guidance": "tuned"}
 
 
@@ -132,10 +134,9 @@ def captured(monkeypatch):
 
 OPTIONS = ["--guidance", "clean", "--guidance-preset", "paper", "--rho", "2", "--guided-clip-range", "3",
            "--push-weight", "alpha_bar", "--checked", "--anchored", "--repair-steps", "5", "--hold-unclear",
-           "--push-turn", "30",
+           "--push-turn", "30", "--no-bridge-gaps", "--no-escape-inside",
            "--margin", "0.03", "--body", "sphere", "--held-radius", "0.05",
-           "--refit-obstacles", "--no-bridge-gaps", "--no-escape-inside", "--obstacle-shape", "box",
-           "--image-size", "96"]
+           "--refit-obstacles", "--obstacle-shape", "box", "--image-size", "96"]
 
 
 def test_eval_and_run_options_map_onto_the_nested_settings(captured, tmp_path):
@@ -148,11 +149,13 @@ def test_eval_and_run_options_map_onto_the_nested_settings(captured, tmp_path):
         assert config.guidance == GuidanceSettings(mode="clean", rho=2.0, last_steps=10, metric_gradient=False,
                                                    densify=1, guided_clip_range=3.0, push_weight="alpha_bar",
                                                    checked=True, anchored=True, repair_steps=5, hold_unclear=True,
-                                                   push_turn=30.0, tuned=False, keep=config.guidance.keep)
+                                                   push_turn=30.0, bridge_gaps=False, escape_when_inside=False,
+                                                   tuned=False, keep=config.guidance.keep)
         assert set(config.guidance.keep) == {"rho", "guided_clip_range", "push_weight", "checked", "anchored",
-                                             "repair_steps", "hold_unclear", "push_turn"}
+                                             "repair_steps", "hold_unclear", "push_turn", "bridge_gaps",
+                                             "escape_when_inside"}
         assert config.obstacle == ObstacleSettings(shape="box", margin=0.03, body="sphere", held_radius=0.05,
-                                                   refit=True, bridge_gaps=False, escape_when_inside=False)
+                                                   refit=True)
         assert config.perception == PerceptionSettings(image_size=96)
 
 

@@ -104,8 +104,7 @@ def test_results_saved_flat_before_the_settings_were_nested_are_read_into_them(t
     write_json(out, saved)
     paper = EvalConfig(checkpoint="run", task="bowl_pour", variation="obstacle", episodes=3,
                        guidance=GUIDANCE_PRESETS["paper"], scheduler="ddpm", steps=100,
-                       obstacle=ObstacleSettings(body="sphere", bridge_gaps=False, escape_when_inside=False),
-                       obstacle_scenes_only=True, out=str(out))  # saved before the walls and the escape existed
+                       obstacle=ObstacleSettings(body="sphere"), obstacle_scenes_only=True, out=str(out))
     assert EvalConfig.from_dict(saved["config"]) == replace(paper, workers=2)
     assert cached_eval(paper) == saved  # the same evaluation: reused
     for changed in (replace(paper, guidance=replace(paper.guidance, rho=2.0)),
@@ -144,20 +143,21 @@ def test_results_saved_before_the_cut_to_the_clear_start_are_not_taken_for_today
 
 def test_results_saved_before_the_gap_walls_and_the_escape_are_read_as_made_without_them(tmp_path):
     out = tmp_path / "two.json"
-    for guidance, reused in ((GUIDANCE_PRESETS["recommended"], False), ("none", True)):
-        today = EvalConfig(checkpoint="run", task="bowl_pour", variation="obstacle:2", episodes=3,
-                           guidance=guidance, out=str(out))
-        before = json.loads(json.dumps(asdict(today)))
-        for name in ("bridge_gaps", "escape_when_inside"):
-            before["obstacle"].pop(name)
-        write_json(out, {"config": before, "summary": {"success_rate": 0.5}})
-        # guided: what that code ran, so today's default is evaluated anew; unguided: neither was ever read
-        assert (cached_eval(today) is not None) == reused
-    without = replace(today, guidance=GUIDANCE_PRESETS["recommended"],
-                      obstacle=ObstacleSettings(bridge_gaps=False, escape_when_inside=False))
-    write_json(out, {"config": {**before, "guidance": json.loads(json.dumps(asdict(without.guidance)))},
-                     "summary": {"success_rate": 0.5}})
+    today = EvalConfig(checkpoint="run", task="bowl_pour", variation="obstacle:2", episodes=3,
+                       guidance=GUIDANCE_PRESETS["recommended"], out=str(out))
+    before = json.loads(json.dumps(asdict(today)))
+    for name in ("bridge_gaps", "escape_when_inside"):
+        before["guidance"].pop(name)  # saved before the fields existed
+    write_json(out, {"config": before, "summary": {"success_rate": 0.5}})
+    assert cached_eval(today) is None  # what that code ran is not today's default
+    without = replace(today, guidance=replace(today.guidance, bridge_gaps=False, escape_when_inside=False))
     assert cached_eval(without) is not None
+    # saved while both were obstacle settings: read into the guidance section
+    moved = json.loads(json.dumps(asdict(today)))
+    moved["obstacle"].update(bridge_gaps=moved["guidance"].pop("bridge_gaps"),
+                             escape_when_inside=moved["guidance"].pop("escape_when_inside"))
+    write_json(out, {"config": moved, "summary": {"success_rate": 0.5}})
+    assert cached_eval(today) is not None
 
 
 def test_unguided_results_stay_current_when_a_guidance_default_changes(tmp_path):

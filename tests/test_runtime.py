@@ -552,8 +552,9 @@ def test_a_hand_already_inside_the_margin_may_move_away_but_not_closer_when_esca
     state = state.copy()
     kept = {}
     for escape in (False, True):
-        model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02, escape_when_inside=escape)
-        runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=model), obstacle_phrases=["obstacle_0"])
+        model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
+        config = RuntimeConfig(obstacle=model, escape_when_inside=escape)
+        runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
         runner.update_obstacles(frame, state)
         (cylinder,) = runner.obstacles
         axis = cylinder.center.numpy()

@@ -497,8 +497,11 @@ FLAT_EVAL_FIELDS = {
 EVAL_FIELDS_BEFORE = {"body": "sphere"}
 # ... and the same for fields added to a settings section (every guided result before them ran without).
 SECTION_FIELDS_BEFORE = {"guidance": {"anchored": False, "repair_steps": 0, "hold_unclear": False,
-                                       "push_turn": 0.0, "tuned": False},
-                         "obstacle": {"bridge_gaps": False, "escape_when_inside": False}}
+                                       "push_turn": 0.0, "bridge_gaps": False, "escape_when_inside": False,
+                                       "tuned": False}}
+# Fields that moved from one settings section to another: (from, to, name); a5d5ae9 saved these two as obstacle
+# settings before they became guidance settings (tunable per policy).
+MOVED_SECTION_FIELDS = (("obstacle", "guidance", "bridge_gaps"), ("obstacle", "guidance", "escape_when_inside"))
 # Guidance fields that say how the settings were chosen, not what ran: a saved config has the tuning laid over it.
 GUIDANCE_CHOICE_FIELDS = ("tuned", "keep")
 EPISODE_LOG_FORMAT = "lano3dp-eval-episodes"
@@ -537,6 +540,9 @@ def saved_config(made: Mapping[str, Any]) -> dict[str, Any]:
             continue
         if isinstance(home := made.setdefault(section, {}), dict):  # else no EvalConfig wrote it: it won't match
             home[name] = value
+    for source, target, name in MOVED_SECTION_FIELDS:
+        if isinstance(made.get(source), dict) and name in made[source] and isinstance(made.get(target), dict):
+            made[target][name] = made[source].pop(name)
     for spec in fields(EvalConfig):
         if spec.name in EVAL_FIELDS_NOT_MEASURED or (spec.default is MISSING and spec.default_factory is MISSING):
             continue
@@ -544,11 +550,8 @@ def saved_config(made: Mapping[str, Any]) -> dict[str, Any]:
         if spec.name in _SECTIONS:
             if isinstance(section := made.get(spec.name, {}), Mapping):  # else no EvalConfig wrote it: it won't match
                 before = SECTION_FIELDS_BEFORE.get(spec.name, {})
-                guide = made.get("guidance") if isinstance(made.get("guidance"), Mapping) else {}
                 if spec.name == "guidance" and section.get("mode") == "none":
                     before = {}  # unguided: the guidance fields changed nothing, so today's defaults describe it
-                if spec.name == "obstacle" and guide.get("mode") == "none" and not guide.get("checked"):
-                    before = {}  # nor the obstacle fields that only guided chunks read
                 made[spec.name] = {**json.loads(json.dumps(asdict(default))), **before, **section}
         elif spec.name not in made:
             made[spec.name] = json.loads(json.dumps(default))

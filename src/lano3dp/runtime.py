@@ -109,6 +109,10 @@ class RuntimeConfig:
         hold_unclear: after the repair, execute only the start of the chunk predicted to clear the obstacles by
             half the margin, and hold still when none does (`guidance.clear_prefix`); the next chunk re-plans.
         push_turn: degrees each obstacle's push is turned round it (`guidance.TurnedPush`; with `anchored`).
+        bridge_gaps: guide against a wall across every gap between two obstacles too narrow for the body
+            (`ObstacleModel.passable_gap`, `guidance.bridge_narrow_gaps`) too.
+        escape_when_inside: with `hold_unclear`, a hand already closer than half the margin may execute the
+            start of a chunk that gets it no closer, rather than hold still.
         step_limit: metres the end effector moves at most per env step, which the executed path is predicted
             under (the built-in simulator's `max_ee_step`, filled in by evaluation and `run`; None: every
             waypoint is assumed reached).
@@ -130,6 +134,8 @@ class RuntimeConfig:
     repair_steps: int = _RECOMMENDED.repair_steps
     hold_unclear: bool = _RECOMMENDED.hold_unclear
     push_turn: float = _RECOMMENDED.push_turn
+    bridge_gaps: bool = _RECOMMENDED.bridge_gaps
+    escape_when_inside: bool = _RECOMMENDED.escape_when_inside
     step_limit: float | None = None
     seed: int = 0
 
@@ -167,13 +173,12 @@ class RuntimeConfig:
         return cls(guidance=sampler, scheduler=scheduler, num_inference_steps=num_inference_steps,
                    n_action_steps=n_action_steps,
                    obstacle=ObstacleModel(shape=obstacle.shape, margin=obstacle.margin, body=obstacle.body,
-                                          held_radius=obstacle.held_radius, refit_every_chunk=obstacle.refit,
-                                          bridge_gaps=obstacle.bridge_gaps,
-                                          escape_when_inside=obstacle.escape_when_inside),
+                                          held_radius=obstacle.held_radius, refit_every_chunk=obstacle.refit),
                    checked=checked, metric_gradient=guidance.metric_gradient, densify=guidance.densify,
                    guide_when_needed=guidance.guide_when_needed, anchored=guidance.anchored,
                    repair_steps=guidance.repair_steps, hold_unclear=guidance.hold_unclear,
-                   push_turn=guidance.push_turn, step_limit=step_limit, seed=seed)
+                   push_turn=guidance.push_turn, bridge_gaps=guidance.bridge_gaps,
+                   escape_when_inside=guidance.escape_when_inside, step_limit=step_limit, seed=seed)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
@@ -294,7 +299,7 @@ class PolicyRunner:
         self.chunks: list[ChunkRecord] = []
         self.obstacle_cost: PositionCost | None = None
         self.obstacles: ObstacleSet | None = None
-        self.gap_walls: list[PositionCost] = []  # walls across gaps too narrow to pass (ObstacleModel.bridge_gaps)
+        self.gap_walls: list[PositionCost] = []  # walls across gaps too narrow to pass (RuntimeConfig.bridge_gaps)
         self.held_radius: float | None = None
         self.step_count = 0
         self.held_clouds = 0  # frames in which a hidden target kept its previous cloud
@@ -460,12 +465,12 @@ class PolicyRunner:
                 self.stale_obstacle_fits += 1  # the arm hides it now: keep the last fit
         if self.obstacle_cost is None:
             self.gap_walls = bridge_narrow_gaps(list(self.obstacles), model.passable_gap(self.held_radius or 0.0)) \
-                if model.bridge_gaps else []
+                if self.config.bridge_gaps else []
         if self.obstacle_cost is None or model.body == "swept" or self.config.anchored:
             self.obstacle_cost = self.guidance_cost(frame, np.asarray(state, dtype=np.float32))
 
     def guided_obstacles(self) -> list[PositionCost]:
-        """The fitted obstacles and the walls across gaps too narrow to pass (`ObstacleModel.bridge_gaps`)."""
+        """The fitted obstacles and the walls across gaps too narrow to pass (`RuntimeConfig.bridge_gaps`)."""
         return list(self.obstacles) + self.gap_walls
 
     def guidance_cost(self, frame: RGBDFrame, state: np.ndarray) -> PositionCost:
@@ -600,7 +605,7 @@ class PolicyRunner:
         (`guidance.clear_prefix`); the last kept action may be moved part of the way to its waypoint."""
         start = torch.as_tensor(np.asarray(state[:3], dtype=np.float64))[None]
         required = self.config.obstacle.margin / 2
-        if self.config.obstacle.escape_when_inside:
+        if self.config.escape_when_inside:
             # a hand already inside (an obstacle moved at it, or a grasped object's ball appeared near one) may
             # move where it gets no closer: holding still there let moving obstacles walk into it
             required = min(required, cost.present_clearance())
@@ -655,7 +660,7 @@ class EpisodeResult:
         chunk_predicted_clearance: per chunk, the runner's own clearance estimate of the executed waypoints.
         ee_path: (steps + 1, 3) EE positions, metres (kept for plots; dropped from JSON by default).
         obstacles: the fitted obstacle shapes the runner guided against (see `describe_obstacle`).
-        gap_walls: walls across gaps too narrow to pass that it guided against too (`ObstacleModel.bridge_gaps`).
+        gap_walls: walls across gaps too narrow to pass that it guided against too (`RuntimeConfig.bridge_gaps`).
         held_radius: m, the held extent used in Q*.
         held_clouds: target clouds carried over from the previous frame because the target was hidden.
         partly_hidden: targets whose first-frame cloud came from the few points an obstacle left in view.

@@ -216,6 +216,14 @@ PUSH_TURN = typer.Option(None, "--push-turn", min=0.0, max=89.9,
                          help="Degrees to turn each obstacle's push round it, towards the side the chunk already "
                               "passes, so a chunk headed straight at it goes round rather than back (0: straight "
                               f"away; needs --anchored; default: {_preset_values('push_turn')}).")
+BRIDGE_GAPS = typer.Option(None, "--bridge-gaps/--no-bridge-gaps",
+                           help="Guide against a wall across every gap between two obstacles too narrow for the "
+                                "hand too, so the path goes round the pair instead of stalling at the gap "
+                                f"(default: {_preset_values('bridge_gaps')}).")
+ESCAPE_INSIDE = typer.Option(None, "--escape-inside/--no-escape-inside",
+                             help="With --hold-unclear, a hand already closer to an obstacle than the hold keeps (a "
+                                  "moving obstacle came at it) moves where it gets no closer, instead of holding "
+                                  f"still (default: {_preset_values('escape_when_inside')}).")
 TUNED = typer.Option(None, "--checkpoint-guidance/--no-checkpoint-guidance",
                      help="Take the guidance the checkpoint was tuned with (its guidance.json) for every guidance "
                           "option not given here, or keep the preset's (default: "
@@ -234,12 +242,6 @@ HELD_RADIUS = typer.Option(None, "--held-radius", min=0.0, help="--body sphere: 
                                                                 "measured from the held object's cloud.")
 REFIT_OBSTACLES = typer.Option(ObstacleSettings.refit, "--refit-obstacles/--no-refit-obstacles",
                                help="Re-fit obstacles before every chunk (moving obstacles).")
-BRIDGE_GAPS = typer.Option(ObstacleSettings.bridge_gaps, "--bridge-gaps/--no-bridge-gaps",
-                           help="Guide against a wall across every gap between two obstacles too narrow for the "
-                                "hand, so the path goes round the pair instead of stalling at the gap.")
-ESCAPE_INSIDE = typer.Option(ObstacleSettings.escape_when_inside, "--escape-inside/--no-escape-inside",
-                             help="A hand already closer to an obstacle than the hold keeps (a moving obstacle came "
-                                  "at it) moves where it gets no closer, instead of holding still.")
 SEGMENTER = typer.Option(PerceptionSettings.segmenter, "--segmenter", help=SEGMENTER_HELP)
 DETECTOR = typer.Option(PerceptionSettings.detector, "--detector", help="open-vocab: grounding_dino | owlv2.")
 DETECTOR_DIR = typer.Option(None, "--detector-dir", help=DETECTOR_DIR_HELP)
@@ -263,16 +265,14 @@ def guidance_settings(mode: str, preset: str, **overrides) -> GuidanceSettings:
 
 
 def obstacle_settings(shape: str, margin: float, body: str, held_radius: float | None,
-                      refit: bool, bridge_gaps: bool = ObstacleSettings.bridge_gaps,
-                      escape_inside: bool = ObstacleSettings.escape_when_inside) -> ObstacleSettings:
+                      refit: bool) -> ObstacleSettings:
     """The obstacle options; the shape is checked here, so call it after --env is imported (it may register one)."""
     choice(body, BODY_MODELS, "--body")
     obstacle_shape(shape)
     if held_radius is not None and body != "sphere":
         raise typer.BadParameter("a fixed held radius sizes the sphere body model; add --body sphere",
                                  param_hint="--held-radius")
-    return ObstacleSettings(shape=shape, margin=margin, body=body, held_radius=held_radius, refit=refit,
-                            bridge_gaps=bridge_gaps, escape_when_inside=escape_inside)
+    return ObstacleSettings(shape=shape, margin=margin, body=body, held_radius=held_radius, refit=refit)
 
 
 def perception_settings(kind: str, detector: str, detector_dir: Path | None, sam_dir: Path | None,
@@ -288,7 +288,8 @@ GUIDANCE_OVERRIDES = {"rho": "rho", "last_steps": "last_steps", "metric_gradient
                       "guided_clip_range": "guided_clip_range", "push_weight": "push_weight", "checked": "checked",
                       "guide_when_needed": "guide_when_needed", "anchored": "anchored",
                       "repair_steps": "repair_steps", "hold_unclear": "hold_unclear",
-                      "push_turn": "push_turn", "tuned": "checkpoint_guidance"}
+                      "push_turn": "push_turn", "bridge_gaps": "bridge_gaps", "escape_when_inside": "escape_inside",
+                      "tuned": "checkpoint_guidance"}
 
 
 def episode_settings(params: Mapping[str, Any]) -> tuple[GuidanceSettings, ObstacleSettings, PerceptionSettings]:
@@ -303,7 +304,7 @@ def episode_settings(params: Mapping[str, Any]) -> tuple[GuidanceSettings, Obsta
                                  **{name: params[option] for name, option in GUIDANCE_OVERRIDES.items()})
     choice(params["scheduler"], SCHEDULERS, "--scheduler")
     obstacle = obstacle_settings(params["obstacle_shape"], params["margin"], params["body"], params["held_radius"],
-                                 params["refit_obstacles"], params["bridge_gaps"], params["escape_inside"])
+                                 params["refit_obstacles"])
     perception = perception_settings(params["segmenter"], params["detector"], params["detector_dir"],
                                      params["sam_dir"], params["image_size"])
     return guidance, obstacle, perception

@@ -39,6 +39,8 @@ def eval_command(
     repair_steps: int = _options.REPAIR_STEPS,
     hold_unclear: bool = _options.HOLD_UNCLEAR,
     push_turn: float = _options.PUSH_TURN,
+    bridge_gaps: bool = _options.BRIDGE_GAPS,
+    escape_inside: bool = _options.ESCAPE_INSIDE,
     checkpoint_guidance: bool = _options.TUNED,
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
@@ -47,8 +49,6 @@ def eval_command(
     body: str = _options.BODY,
     held_radius: float = _options.HELD_RADIUS,
     refit_obstacles: bool = _options.REFIT_OBSTACLES,
-    bridge_gaps: bool = _options.BRIDGE_GAPS,
-    escape_inside: bool = _options.ESCAPE_INSIDE,
     obstacle_scenes_only: bool = typer.Option(False, help="With an obstacle variation: the first --episodes seeds "
                                                           "whose scene has room for its obstacles."),
     max_steps: int = typer.Option(None, min=1, help="Episode step limit (default: the task's)."),

@@ -18,7 +18,7 @@ _EXPORTS = {
     "obstacle_guidance_cost": "costs", "push_clear": "costs", "ExecutedPath": "costs", "clear_prefix": "costs",
     "reached_positions": "costs", "TurnedPush": "costs", "ObstacleModel": "obstacle_model",
     "CollisionError": "exceptions", "GuidanceError": "exceptions",
-    "fit_box": "fitting", "fit_cylinder": "fitting",
+    "fit_box": "fitting", "fit_cylinder": "fitting", "bridge_narrow_gaps": "fitting",
     "DenoiseStep": "sampler", "GuidanceConfig": "sampler", "GuidanceMode": "sampler", "denoise": "sampler",
     "ObstacleShape": "shapes", "UnknownObstacleShapeError": "shapes", "get_obstacle_shape": "shapes",
     "obstacle_shape_names": "shapes", "register_obstacle_shape": "shapes", "unregister_obstacle_shape": "shapes",
@@ -31,7 +31,7 @@ __all__ = [
     "Cylinder", "DenoiseStep", "Densified", "ExecutedPath", "GuidanceConfig",
     "GuidanceError", "GuidanceMode", "GuidanceSettings", "MetricGradient", "Obstacle", "ObstacleSet",
     "ObstacleModel", "ObstacleSettings", "ObstacleShape", "OrientedBox", "PointCloudObstacle", "PositionCost",
-    "Sphere", "SweptBody", "TurnedPush", "UnknownObstacleShapeError", "checked_sample",
+    "Sphere", "SweptBody", "TurnedPush", "UnknownObstacleShapeError", "bridge_narrow_gaps", "checked_sample",
     "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "load_guidance_tuning", "min_clearance",
     "obstacle_guidance_cost", "save_guidance_tuning",
     "obstacle_shape_names", "push_clear", "clear_prefix", "reached_positions",
@@ -62,7 +62,7 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
         reached_positions,
     )
     from lano3dp.guidance.exceptions import CollisionError, GuidanceError
-    from lano3dp.guidance.fitting import fit_box, fit_cylinder
+    from lano3dp.guidance.fitting import bridge_narrow_gaps, fit_box, fit_cylinder
     from lano3dp.guidance.obstacle_model import ObstacleModel
     from lano3dp.guidance.sampler import DenoiseStep, GuidanceConfig, GuidanceMode, denoise
     from lano3dp.guidance.settings import (

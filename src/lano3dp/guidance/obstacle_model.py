@@ -39,11 +39,6 @@ class ObstacleModel:
         xy_only: measure distances in the horizontal plane only (the paper's setting).
         refit_every_chunk: re-segment and re-fit obstacles before every chunk (moving obstacles); by default
             they are fitted once, on the first frame of the episode, before the arm can occlude them.
-        bridge_gaps: guide against a wall across every gap between two obstacles too narrow for the body
-            (`passable_gap`; `guidance.bridge_narrow_gaps`), so the path goes round the pair, not at the gap.
-        escape_when_inside: where the hand already is closer to an obstacle than the runtime's hold keeps
-            (`RuntimeConfig.hold_unclear`), execute the start of a chunk that gets no closer, instead of holding
-            still while a moving obstacle walks into the hand.
     """
 
     shape: str = ObstacleSettings.shape
@@ -56,8 +51,6 @@ class ObstacleModel:
     hand_radius: float = 0.025
     xy_only: bool = True
     refit_every_chunk: bool = False
-    bridge_gaps: bool = ObstacleSettings.bridge_gaps
-    escape_when_inside: bool = ObstacleSettings.escape_when_inside
 
     def __post_init__(self):
         get_obstacle_shape(self.shape)  # an unknown name fails here, naming the registered ones

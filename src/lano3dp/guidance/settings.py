@@ -75,6 +75,12 @@ class GuidanceSettings:
         push_turn: degrees by which each obstacle's push is turned round it, towards the side the chunk already
             passes (`guidance.TurnedPush`; needs `anchored`; 0: straight away from it, the paper's): a chunk
             headed straight at an obstacle is then carried round it instead of back.
+        bridge_gaps: also guide against a wall across every gap between two obstacles too narrow for the hand
+            (`guidance.bridge_narrow_gaps`), so the path goes round the pair rather than stalling at the gap
+            (two-obstacle tuning scenes, 50 each: put_item 29 against 18 successes, bottle_in_drawer 31 against 21).
+        escape_when_inside: with `hold_unclear`, a hand already closer to an obstacle than the hold keeps (a
+            moving obstacle came at it) executes the start of a chunk that gets no closer, rather than holding
+            still while the obstacle walks into it.
         tuned: take the settings the checkpoint was tuned with (its `guidance.json`, see `tuned_for`) for
             every field not in `keep` (the paper preset: off, its form is fixed).
         keep: fields the user chose, which a checkpoint's tuning leaves as they are (the command line fills it
@@ -95,6 +101,8 @@ class GuidanceSettings:
     repair_steps: int = 20
     hold_unclear: bool = True
     push_turn: float = 0.0
+    bridge_gaps: bool = True
+    escape_when_inside: bool = True
     tuned: bool = True
     keep: tuple[str, ...] = ()
 
@@ -191,7 +199,8 @@ GUIDANCE_PRESETS: dict[str, GuidanceSettings] = {
     # between them did not). The paper also sampled with DDPM-100 and kept a ball of the held object's diameter
     # clear: add scheduler "ddpm", steps 100 and ObstacleSettings(body="sphere").
     "paper": GuidanceSettings(rho=4.0, last_steps=10, metric_gradient=False, densify=1, anchored=False,
-                              repair_steps=0, hold_unclear=False, push_turn=0.0, tuned=False),
+                              repair_steps=0, hold_unclear=False, push_turn=0.0, bridge_gaps=False,
+                              escape_when_inside=False, tuned=False),
 }
 
 
@@ -207,10 +216,6 @@ class ObstacleSettings:
             "sphere" (the paper: one ball of held_radius round the EE point).
         held_radius: ("sphere") its radius in m; None measures it from the held object's cloud.
         refit: re-segment and re-fit the obstacles before every chunk (moving obstacles).
-        bridge_gaps: guide against a wall across every gap between two obstacles too narrow for the body
-            (two-obstacle tuning scenes: 29 against 18 of 50 for put_item, 31 against 21 for bottle_in_drawer).
-        escape_when_inside: a hand already closer to an obstacle than the hold keeps may move where it gets
-            no closer, rather than hold still (moving obstacles).
     """
 
     shape: str = "cylinder"
@@ -218,8 +223,6 @@ class ObstacleSettings:
     body: str = "swept"
     held_radius: float | None = None
     refit: bool = False
-    bridge_gaps: bool = True
-    escape_when_inside: bool = True
 
     def __post_init__(self):
         from lano3dp.guidance.shapes import get_obstacle_shape

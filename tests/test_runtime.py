@@ -568,3 +568,30 @@ def test_a_hand_already_inside_the_margin_may_move_away_but_not_closer_when_esca
             kept[escape, name] = runner.cut_to_clear(actions, state, cost).shape[1]
     assert kept[False, "away"] == kept[False, "closer"] == 0  # held still either way
     assert kept[True, "away"] == 4 and kept[True, "closer"] == 0
+
+
+def test_a_hand_inside_an_obstacle_with_no_way_forward_steps_straight_out(observer):
+    env = FakeEnv([BOWL, PAN, OBSTACLE])
+    obs, _ = env.reset(seed=0)
+    frame, state = observe(env, obs)
+    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=model), obstacle_phrases=["obstacle_0"])
+    runner.update_obstacles(frame, state)
+    (cylinder,) = runner.obstacles
+    axis = cylinder.center.numpy()
+
+    def retreat_from(x: float, step: float) -> tuple[np.ndarray, np.ndarray, float]:
+        here = state.copy()
+        here[:3] = [x, axis[1], 0.25]
+        waypoints = np.array([[x + step * i, axis[1], 0.25] for i in range(1, 5)])
+        actions = np.hstack([waypoints, np.tile(ROT6D, (4, 1)), np.ones((4, 1))])
+        cost = runner.executed_path_cost(here, torch.as_tensor(actions, dtype=torch.float32))
+        return here[:3], runner.retreat(here, cost).numpy(), cost.present_clearance()
+
+    # 2 cm into the held sphere's reach, every step of the chunk deeper: straight back, away from the axis
+    here, out, gap = retreat_from(axis[0] - cylinder.safety_distance + 0.04, step=0.01)
+    assert gap < -0.01 and out[0] < here[0] - 0.02 and abs(out[1] - here[1]) < 1e-6
+    assert float(cylinder.clearance(torch.as_tensor(out)[None, None])) > gap + 0.02
+    # not inside: an ordinary hold
+    here, out, _ = retreat_from(axis[0] - cylinder.safety_distance - 0.05, step=0.0)
+    np.testing.assert_allclose(out, here, atol=1e-6)

@@ -553,6 +553,8 @@ class PolicyRunner:
             if actions.shape[1] == 0:  # nothing of it is clear: hold the present pose, with the chunk's gripper
                 actions = chunk.trajectory[:, start:start + 1].clone()
                 actions[0, 0, :9] = torch.as_tensor(np.asarray(state[:9]), dtype=actions.dtype)
+                if cfg.escape_when_inside:
+                    actions[0, 0, :3] = self.retreat(state, path_cost).to(actions.dtype)
         chunk = ActionChunk(actions, chunk.trajectory)
         record.trajectory = chunk.trajectory[0].detach().cpu().numpy().astype(np.float32)
         record.latency_s = time.perf_counter() - started
@@ -615,6 +617,20 @@ class PolicyRunner:
         cut = actions[:, :kept.shape[1]].clone()
         cut[:, :, :3] = kept.to(cut.dtype)
         return cut
+
+    def retreat(self, state: np.ndarray, cost: ExecutedPath) -> torch.Tensor:
+        """(3,) where a hand already inside half the margin steps to when no chunk start keeps it from going
+        deeper: straight out along the executed-path cost, a few 1 cm steps of plain descent; its present
+        position when it is not inside (an ordinary hold). A moving obstacle traced on a table scene held a hand
+        3 cm inside it for 48 chunks, every chunk's first step leading deeper."""
+        here = torch.as_tensor(np.asarray(state[:3], dtype=np.float64))
+        required = self.config.obstacle.margin / 2
+        deficit = required - cost.present_clearance()
+        if deficit <= 0:
+            return here
+        steps = min(math.ceil(deficit / 0.01) + 1, 5)  # at most 5 cm: the arm's step limit, re-planned after
+        moved, _ = push_clear(cost, here[None, None], clearance=required, iterations=steps)
+        return moved[0, 0]
 
     def act(self, frame: RGBDFrame, state: np.ndarray) -> np.ndarray:
         """Observe, let the policy re-plan (through `plan`) when its queue is empty, and return the next (10,)

@@ -112,7 +112,8 @@ class RuntimeConfig:
         bridge_gaps: guide against a wall across every gap between two obstacles too narrow for the body
             (`ObstacleModel.passable_gap`, `guidance.bridge_narrow_gaps`) too.
         escape_when_inside: with `hold_unclear`, a hand already closer than half the margin may execute the
-            start of a chunk that gets it no closer, rather than hold still.
+            start of a chunk that gets it no closer, and steps straight out (`PolicyRunner.retreat`) when every
+            chunk leads deeper, rather than hold still.
         step_limit: metres the end effector moves at most per env step, which the executed path is predicted
             under (the built-in simulator's `max_ee_step`, filled in by evaluation and `run`; None: every
             waypoint is assumed reached).
@@ -608,8 +609,8 @@ class PolicyRunner:
         start = torch.as_tensor(np.asarray(state[:3], dtype=np.float64))[None]
         required = self.config.obstacle.margin / 2
         if self.config.escape_when_inside:
-            # a hand already inside (an obstacle moved at it, or a grasped object's ball appeared near one) may
-            # move where it gets no closer: holding still there let moving obstacles walk into it
+            # a hand already inside (a moving obstacle came at it) may move where it gets no closer: holding
+            # still there let the obstacle walk into it
             required = min(required, cost.present_clearance())
         kept = clear_prefix(cost, actions[:, :, :3].double(), start, clearance=required)
         if kept.shape[1] == actions.shape[1]:

@@ -222,8 +222,8 @@ BRIDGE_GAPS = typer.Option(None, "--bridge-gaps/--no-bridge-gaps",
                                 f"(default: {_preset_values('bridge_gaps')}).")
 ESCAPE_INSIDE = typer.Option(None, "--escape-inside/--no-escape-inside",
                              help="With --hold-unclear, a hand already closer to an obstacle than the hold keeps (a "
-                                  "moving obstacle came at it) moves where it gets no closer, instead of holding "
-                                  f"still (default: {_preset_values('escape_when_inside')}).")
+                                  "moving obstacle came at it) moves where it gets no closer, or straight out, "
+                                  f"instead of holding still (default: {_preset_values('escape_when_inside')}).")
 TUNED = typer.Option(None, "--checkpoint-guidance/--no-checkpoint-guidance",
                      help="Take the guidance the checkpoint was tuned with (its guidance.json) for every guidance "
                           "option not given here, or keep the preset's (default: "

@@ -79,8 +79,8 @@ class GuidanceSettings:
             (`guidance.bridge_narrow_gaps`), so the path goes round the pair rather than stalling at the gap
             (two-obstacle tuning scenes, 50 each: put_item 29 against 18 successes, bottle_in_drawer 31 against 21).
         escape_when_inside: with `hold_unclear`, a hand already closer to an obstacle than the hold keeps (a
-            moving obstacle came at it) executes the start of a chunk that gets no closer, rather than holding
-            still while the obstacle walks into it.
+            moving obstacle came at it) executes the start of a chunk that gets no closer, or steps straight out
+            when every chunk leads deeper, rather than holding still while the obstacle walks into it.
         tuned: take the settings the checkpoint was tuned with (its `guidance.json`, see `tuned_for`) for
             every field not in `keep` (the paper preset: off, its form is fixed).
         keep: fields the user chose, which a checkpoint's tuning leaves as they are (the command line fills it

@@ -117,10 +117,10 @@ def bridge_narrow_gaps(obstacles, passable: float) -> list[OrientedBox]:
         One `OrientedBox` (xy_only) per bridged pair, carrying the smaller held radius and margin of the two.
     """
     walls = []
-    flat = [o for o in obstacles if getattr(o, "xy_only", False) and obstacle_axis_xy(o) is not None]
-    for index, first in enumerate(flat):
-        for second in flat[index + 1:]:
-            axis_a, axis_b = obstacle_axis_xy(first).double(), obstacle_axis_xy(second).double()
+    axes = [(o, obstacle_axis_xy(o)) for o in obstacles if getattr(o, "xy_only", False)]
+    flat = [(o, axis.double()) for o, axis in axes if axis is not None]
+    for index, (first, axis_a) in enumerate(flat):
+        for second, axis_b in flat[index + 1:]:
             between = float(torch.linalg.norm(axis_b - axis_a))
             if between < 1e-6:
                 continue

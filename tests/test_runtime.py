@@ -526,6 +526,40 @@ def test_a_target_the_obstacle_mostly_covers_in_the_first_frame_keeps_the_cloud_
     assert result.steps == 0 and "ObjectNotFoundError" in result.error  # nothing to keep: an honest failure
 
 
+class TwoCameraEnv(FakeEnv):
+    """FakeEnv with a second camera across the table (tilted the other way), as `other_views` gives it."""
+
+    def __init__(self, boxes, **kwargs):
+        super().__init__(boxes, **kwargs)
+        self.other_frame = render_boxes(top_down_camera(size=64, height=1.2, fovy_deg=50, tilt_deg=-25), boxes)
+        self.other_views_rendered = 0
+
+    def other_views(self):
+        self.other_views_rendered += 1
+        return [self.other_frame]
+
+
+def test_a_target_hidden_from_the_camera_in_the_first_frame_is_taken_from_another_view(observer):
+    """A wall between the camera and the bowl hides all of it; the camera across the table sees it, and the
+    bowl's cloud comes from there in every frame (it stays hidden) instead of failing the episode."""
+    wall = Box("obstacle_0", (BOWL.center_xy[0], -0.08), (0.24, 0.02, 0.30), {"kind": "box", "color": "grey",
+                                                                              "role": "obstacle"})
+    env = TwoCameraEnv([BOWL, PAN, wall], max_steps=6, success_radius=-1.0)
+    assert not np.isin(env.frame_.segmentation, env.frame_.instance_names["bowl"]).any()
+    assert np.isin(env.other_frame.segmentation, env.other_frame.instance_names["bowl"]).sum() >= observer.min_points
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=2), obstacle_phrases=["obstacle_0"])
+    result = rollout(env, runner, seed=0, stop_on_success=False)
+    assert result.error is None and result.steps == 6
+    assert result.seen_from_other_views == ["bowl"] and result.held_clouds == 0
+    assert env.other_views_rendered == result.steps  # once per frame the bowl is hidden in, not for the wall
+    # the other camera's cloud is the bowl's own, not the wall's
+    assert np.linalg.norm(np.array(result.targets["bowl"][:2]) - BOWL.center_xy) < 0.06
+
+    env_without = FakeEnv([BOWL, PAN, wall], max_steps=6)  # one camera: nowhere else to look
+    result = rollout(env_without, PolicyRunner(FakePolicy(), observer), seed=0)
+    assert result.steps == 0 and "'bowl' was not found" in result.error
+
+
 def test_guide_when_needed_keeps_the_policys_own_chunk_while_it_clears_the_obstacle(observer):
     guidance = GuidanceConfig(mode="clean", scale=1.0, last_steps=10)
     config = RuntimeConfig(guidance=guidance, obstacle=ObstacleModel(body="sphere", held_radius=0.03),

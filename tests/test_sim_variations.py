@@ -87,6 +87,32 @@ def test_camera_moves_only_the_camera(env):
     assert np.linalg.norm(a - b) < 0.03
 
 
+def test_other_views_see_what_the_obstacle_hides_from_the_camera():
+    """bottle_in_drawer's table scene 1000057: the obstacle hides the whole bottle from the front camera. The
+    env's other cameras see it, back-project it where it stands, and leave out the observation camera."""
+    environment = TabletopEnv("bottle_in_drawer", "obstacle", image_size=96)
+    try:
+        environment.reset(seed=1000057)
+        frame = environment.frame()
+        bottle = environment.instance_names["bottle"]
+        assert not np.isin(frame.segmentation, bottle).any()
+        views = environment.other_views()
+        assert len(views) == 2  # shifted and shifted_left: the front camera is the observation camera
+        assert all(np.linalg.norm(view.camera.position - frame.camera.position) > 0.3 for view in views)
+        observer = ObjectObserver(SimOracleSegmenter(), n_points=128)
+        seen = [observer.observe(view, ["bottle"]).points[0] for view in views
+                if np.isin(view.segmentation, bottle).sum() >= observer.min_points]
+        assert seen
+        true_xy = environment.data.xpos[bottle[0], :2]
+        assert all(np.linalg.norm(cloud.mean(0)[:2] - true_xy) < 0.04 for cloud in seen)
+        environment.reset(seed=1000057, options={"variation": "obstacle+camera"})
+        # the shifted camera observes: the front one becomes another view
+        positions = [view.camera.position for view in environment.other_views()]
+        assert len(positions) == 2 and min(np.linalg.norm(p - frame.camera.position) for p in positions) < 1e-6
+    finally:
+        environment.close()
+
+
 def test_background_recolours_the_table_but_not_the_objects(env):
     table_colours = []
     for variation in ("clean", "background"):

@@ -63,7 +63,8 @@ from lano3dp.guidance.shapes import (
     BUILTIN_OBSTACLE_SHAPES,
     describe_obstacle,  # re-exported: results and plots read it from here
 )
-from lano3dp.perception.exceptions import PerceptionError, TooFewPointsError
+from lano3dp.perception.exceptions import ObjectNotFoundError, PerceptionError, TooFewPointsError
+from lano3dp.perception.observer import ObjectClouds
 from lano3dp.policy.modeling import ActionChunk
 
 # The built-in shapes (kept for code that imported it); `guidance.obstacle_shape_names()` lists every registered one.
@@ -305,6 +306,9 @@ class PolicyRunner:
         self.step_count = 0
         self.held_clouds = 0  # frames in which a hidden target kept its previous cloud
         self.partly_hidden: list[str] = []  # targets taken from a few points in the first frame
+        # () -> this moment from the env's other cameras (its optional `other_views`), set per episode by `reset`
+        self.other_views: Callable[[], Sequence[RGBDFrame]] | None = None
+        self.seen_from_other_views: list[str] = []  # targets and obstacles the first frame missed, found there
         self.stale_obstacle_fits = 0  # re-fits skipped because the obstacle was out of view
         self._last_clouds: np.ndarray | None = None
         self._held_ball: tuple[np.ndarray, float] | None = None  # (offset from the EE, radius) of the held object
@@ -314,9 +318,11 @@ class PolicyRunner:
         self.policy.reset()  # whatever the policy queued before belongs to no episode of this runner
 
     # ---- episode ---------------------------------------------------------------------------
-    def reset(self, seed: int | None = None) -> None:
+    def reset(self, seed: int | None = None,
+              other_views: Callable[[], Sequence[RGBDFrame]] | None = None) -> None:
         """Start an episode: reset the policy (its window and queued actions), forget the fitted obstacles and what
-        was perceived, re-seed the sampling noise."""
+        was perceived, re-seed the sampling noise. `other_views` (the env's, if it has other cameras) is where a
+        target or obstacle the observation camera cannot see in the first frame is looked for."""
         self.policy.reset()
         self.env_actions.clear()
         self.commanded = None
@@ -328,6 +334,8 @@ class PolicyRunner:
         self.step_count = 0
         self.held_clouds = 0
         self.partly_hidden = []
+        self.other_views = other_views
+        self.seen_from_other_views = []
         self.stale_obstacle_fits = 0
         self._last_clouds = None
         self._held_ball = None
@@ -366,7 +374,8 @@ class PolicyRunner:
         A target that is momentarily hidden (too few points, e.g. the pan under the tilted bowl, or behind an
         obstacle) keeps its previous cloud, as a video tracker would and as the demonstrations were recorded
         (`lano3dp.collect`). In the first frame a target with only a few points in view is taken from those;
-        one not in view at all is an error the caller sees.
+        one not in view at all is looked for in the env's other views, and is taken from there whenever the
+        observation camera cannot see it; one seen nowhere is an error the caller sees.
         """
         try:
             clouds = self.observer.observe(frame, self.target_phrases).points
@@ -378,9 +387,8 @@ class PolicyRunner:
                 for slot, phrase in enumerate(self.target_phrases):
                     try:
                         clouds.append(self.observer.observe(frame, [phrase]).points[0])
-                    except PerceptionError:
-                        clouds.append(self._last_clouds[slot])
-                        self.held_clouds += 1
+                    except PerceptionError as hidden:
+                        clouds.append(self._hidden_target_cloud(slot, phrase, hidden))
                 clouds = np.stack(clouds)
         if self._last_clouds is None:
             self.initial_targets = {phrase: clouds[k].mean(0).round(4).tolist()
@@ -389,16 +397,54 @@ class PolicyRunner:
         return clouds
 
     def _first_clouds(self, frame: RGBDFrame) -> np.ndarray:
-        """The first frame's target clouds; a target the obstacle mostly hides is taken from the few points
-        still in view (FIRST_FRAME_MIN_POINTS) rather than failing the episode: there is no earlier cloud."""
-        clouds = []
-        for phrase in self.target_phrases:
+        """The first frame's target clouds (`_first_cloud` each)."""
+        return np.stack([self._first_cloud(frame, phrase) for phrase in self.target_phrases])
+
+    def _first_cloud(self, frame: RGBDFrame, phrase: str) -> np.ndarray:
+        """A target the obstacle mostly hides in the first frame is taken from the few points still in view
+        (FIRST_FRAME_MIN_POINTS) rather than failing the episode: there is no earlier cloud. One with fewer
+        still, or none, is looked for in the other views."""
+        try:
+            return self.observer.observe(frame, [phrase]).points[0]
+        except TooFewPointsError:
+            pass
+        except ObjectNotFoundError as not_found:
+            return self._observe_in_other_views(phrase, not_found).points[0]
+        try:
+            cloud = self.observer.observe(frame, [phrase], min_points=FIRST_FRAME_MIN_POINTS).points[0]
+        except TooFewPointsError as hidden:
+            return self._observe_in_other_views(phrase, hidden).points[0]
+        self.partly_hidden.append(phrase)
+        return cloud
+
+    def _hidden_target_cloud(self, slot: int, phrase: str, hidden: PerceptionError) -> np.ndarray:
+        """A target the camera cannot see after the first frame: from the other views if it was first found
+        there (the camera may never see it: it stands behind the obstacle), else its previous cloud."""
+        if phrase in self.seen_from_other_views:
             try:
-                clouds.append(self.observer.observe(frame, [phrase]).points[0])
-            except TooFewPointsError:
-                clouds.append(self.observer.observe(frame, [phrase], min_points=FIRST_FRAME_MIN_POINTS).points[0])
-                self.partly_hidden.append(phrase)
-        return np.stack(clouds)
+                return self._observe_in_other_views(phrase, hidden).points[0]
+            except PerceptionError:
+                pass
+        self.held_clouds += 1
+        return self._last_clouds[slot]
+
+    def _observe_in_other_views(self, phrase: str, hidden: PerceptionError, instances: bool = False) -> ObjectClouds:
+        """`phrase` from the other view that sees most of it (every instance with `instances`); raises `hidden`,
+        the observation camera's error, when no view sees it or the env has no other views."""
+        found = None
+        for view in self.other_views() if self.other_views is not None else ():
+            try:
+                seen = (self.observer.observe_instances(view, [phrase]) if instances
+                        else self.observer.observe(view, [phrase]))
+            except PerceptionError:
+                continue
+            if found is None or seen.point_counts.sum() > found.point_counts.sum():
+                found = seen
+        if found is None:
+            raise hidden
+        if phrase not in self.seen_from_other_views:
+            self.seen_from_other_views.append(phrase)
+        return found
 
     def policy_input(self, frame: RGBDFrame, state: np.ndarray) -> dict[str, np.ndarray]:
         """One observation as `select_action` takes it: {visual key: (1, ...), "state": (1, 11)}."""
@@ -425,9 +471,20 @@ class PolicyRunner:
         if sphere:
             self.held_radius = self.measure_held_radius(frame)
         # Every matching instance is its own obstacle: "avoid the mugs" fits one cylinder per mug.
-        clouds = self.observer.observe_instances(frame, self.obstacle_phrases)
+        try:
+            clouds = list(self.observer.observe_instances(frame, self.obstacle_phrases).points)
+        except PerceptionError:
+            if self.obstacles is not None:
+                raise  # a re-fit: the caller keeps the last fit
+            # the first fit: an obstacle hidden behind another is looked for in the other views
+            clouds = []
+            for phrase in self.obstacle_phrases:
+                try:
+                    clouds.extend(self.observer.observe_instances(frame, [phrase]).points)
+                except PerceptionError as hidden:
+                    clouds.extend(self._observe_in_other_views(phrase, hidden, instances=True).points)
         return ObstacleSet([self.config.obstacle.fit(points, self.held_radius if sphere else 0.0)
-                            for points in clouds.points])
+                            for points in clouds])
 
     def swept_body(self, frame: RGBDFrame, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(K, 3) world offsets from the EE point and (K,) radii of what moves with it now: the hand, and
@@ -681,6 +738,8 @@ class EpisodeResult:
         held_radius: m, the held extent used in Q*.
         held_clouds: target clouds carried over from the previous frame because the target was hidden.
         partly_hidden: targets whose first-frame cloud came from the few points an obstacle left in view.
+        seen_from_other_views: targets and obstacles the observation camera missed in the first frame, found in the
+            env's other views.
         targets: phrase -> centroid (m) of each target's cloud in the first frame (object policies).
         error: why the episode ended early (perception failure, no clear chunk), or None.
         wall_s: wall time of the episode, seconds.
@@ -707,6 +766,7 @@ class EpisodeResult:
     held_radius: float | None = None
     held_clouds: int = 0
     partly_hidden: list[str] = field(default_factory=list)
+    seen_from_other_views: list[str] = field(default_factory=list)
     targets: dict[str, list[float]] = field(default_factory=dict)
     error: str | None = None
     wall_s: float = 0.0
@@ -758,7 +818,7 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
         stop_on_success: end the episode at the first step whose info says success.
     """
     started = time.perf_counter()
-    runner.reset(seed)
+    runner.reset(seed, other_views=getattr(env, "other_views", None))
     obs, info = env.reset(seed=seed, options=dict(options or {}))
     frame, state = observe(env, obs)
     if on_reset is not None:
@@ -808,6 +868,7 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
                    if runner.obstacles is not None else []),
         gap_walls=[describe_obstacle(wall, "box") for wall in runner.gap_walls],
         held_radius=runner.held_radius, held_clouds=runner.held_clouds, partly_hidden=list(runner.partly_hidden),
+        seen_from_other_views=list(runner.seen_from_other_views),
         targets=dict(runner.initial_targets), error=error,
         wall_s=time.perf_counter() - started,
         # The env latches stages, so its last info holds every stage reached in the episode.

@@ -33,6 +33,7 @@ Reward: 1.0 on success, else 0.0; `terminated` on success, `truncated` at `max_s
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import gymnasium as gym
@@ -45,16 +46,23 @@ from lano3dp.geometry import RGBDFrame
 from lano3dp.geometry.rotations import matrix_to_rot6d
 from lano3dp.sim.experts import CONTROL_HZ, MotionPlan, slerp
 from lano3dp.sim.objects import ObjectInfo, primitives
-from lano3dp.sim.render import FusedRenderer
+from lano3dp.sim.render import CameraImages, FusedRenderer
 from lano3dp.sim.robot import GripperHandle, GripperSpec
-from lano3dp.sim.scene import FRONT_CAMERA, SHIFTED_CAMERA, TIMESTEP, CameraPose, SceneBuilder
+from lano3dp.sim.scene import (
+    FRONT_CAMERA,
+    SHIFTED_CAMERA,
+    SHIFTED_LEFT_CAMERA,
+    TIMESTEP,
+    CameraPose,
+    SceneBuilder,
+)
 from lano3dp.sim.tasks import make_task
 from lano3dp.sim.tasks.base import Layout, SimState, Task, furthest_stage
 from lano3dp.sim.variations import SceneExtras, Variation, sample_extras
 
 WORKSPACE_LOW = np.array([0.05, -0.55, 0.0])
 WORKSPACE_HIGH = np.array([0.95, 0.55, 0.60])
-CAMERAS = {"front": FRONT_CAMERA, "shifted": SHIFTED_CAMERA}
+CAMERAS = {"front": FRONT_CAMERA, "shifted": SHIFTED_CAMERA, "shifted_left": SHIFTED_LEFT_CAMERA}
 # Physics substeps between obstacle checks / mocap updates within one control step.
 _CHUNK = 5
 _SETTLE_STEPS = 75  # 0.3 s for objects to come to rest after building
@@ -122,13 +130,24 @@ def obstacle_scene_seeds(task: str | Task, variation, start: int, count: int, ma
     raise ValueError(f"only {len(seeds)} of {max_tries} {task.name} scenes have room for {variation.name}")
 
 
+def _camera_pose(camera: str | CameraPose) -> CameraPose:
+    if isinstance(camera, CameraPose):
+        return camera
+    if camera not in CAMERAS:
+        raise ValueError(f"unknown camera {camera!r}; use one of {sorted(CAMERAS)} or a CameraPose")
+    return CAMERAS[camera]
+
+
 class TabletopEnv(gym.Env):
     """Gymnasium env for one task; every `reset` builds a fresh scene from the seed.
 
     Args:
         task: registry name ("bowl_pour") or a `Task` instance.
         variation: "clean", axes joined by "+", an iterable of axes, or a `Variation`.
-        camera: "front" (training) or "shifted", or a `CameraPose`; the "camera" variation forces "shifted".
+        camera: "front" (training), "shifted" or "shifted_left", or a `CameraPose`; the "camera" variation forces
+            "shifted".
+        other_cameras: cameras `other_views` renders on request, for a target the observation camera cannot see;
+            any at the episode's observation camera is left out.
         image_size: square image side in pixels (or (height, width)).
         render_rgb: also render the colour image (depth + segmentation are always rendered).
         control_hz: control rate (physics runs at 250 Hz, 4 ms steps; 1 / control_hz must be a multiple of 20 ms).
@@ -141,14 +160,12 @@ class TabletopEnv(gym.Env):
     def __init__(self, task: str | Task = "bowl_pour", variation=None, camera: str | CameraPose = "front",
                  image_size: int | tuple[int, int] = 128, render_rgb: bool = True, control_hz: float = CONTROL_HZ,
                  max_steps: int | None = None, render_mode: str | None = "rgb_array",
-                 motion_limits: MotionLimits = MotionLimits()):
+                 motion_limits: MotionLimits = MotionLimits(),
+                 other_cameras: Sequence[str | CameraPose] = ("front", "shifted", "shifted_left")):
         self.task = make_task(task) if isinstance(task, str) else task
         self.variation = Variation.parse(variation)
-        if isinstance(camera, str):
-            if camera not in CAMERAS:
-                raise ValueError(f"unknown camera {camera!r}; use one of {sorted(CAMERAS)} or a CameraPose")
-            camera = CAMERAS[camera]
-        self.camera_pose = camera
+        self.camera_pose = _camera_pose(camera)
+        self.other_camera_poses = [_camera_pose(other) for other in other_cameras]
         height, width = (image_size, image_size) if np.isscalar(image_size) else tuple(image_size)
         self.height, self.width = int(height), int(width)
         self.render_rgb = render_rgb
@@ -220,6 +237,12 @@ class TabletopEnv(gym.Env):
                 primitives.add_object(builder, extra.kind, extra.name, extra.position, yaw=extra.yaw,
                                       color=extra.color, scale=extra.scale, role=extra.role)
         builder.add_camera(CameraPose("front", extras.camera.position, extras.camera.target, extras.camera.fovy))
+        self._other_cameras = []
+        for pose in self.other_camera_poses:
+            if pose.position != extras.camera.position:
+                name = f"other_{len(self._other_cameras)}"
+                builder.add_camera(CameraPose(name, pose.position, pose.target, pose.fovy))
+                self._other_cameras.append(name)
         self.builder = builder
         self.objects: dict[str, ObjectInfo] = dict(builder.objects)
         model = builder.compile()
@@ -396,13 +419,21 @@ class TabletopEnv(gym.Env):
         """The current camera images as an `RGBDFrame` with ground-truth instance names and attributes."""
         self._check_open()
         if self._frame is None:
-            images = self._images
-            rgb = images.rgb if images.rgb is not None else np.zeros((self.height, self.width, 3), np.uint8)
-            self._frame = RGBDFrame(rgb=rgb, depth=images.depth, camera=images.camera,
-                                    segmentation=images.body_ids, instance_names=self.instance_names,
-                                    instance_attributes=self.instance_attributes,
-                                    timestamp=self._steps / self.control_hz)
+            self._frame = self._as_frame(self._images)
         return self._frame
+
+    def other_views(self) -> list[RGBDFrame]:
+        """This moment seen from the other cameras (`other_cameras`), rendered now: they cost a render each,
+        so the runtime asks only when the observation camera cannot see a target."""
+        self._check_open()
+        return [self._as_frame(self._renderer.render(self.data, name, rgb=self.render_rgb))
+                for name in self._other_cameras]
+
+    def _as_frame(self, images: CameraImages) -> RGBDFrame:
+        rgb = images.rgb if images.rgb is not None else np.zeros((self.height, self.width, 3), np.uint8)
+        return RGBDFrame(rgb=rgb, depth=images.depth, camera=images.camera, segmentation=images.body_ids,
+                         instance_names=self.instance_names, instance_attributes=self.instance_attributes,
+                         timestamp=self._steps / self.control_hz)
 
     @property
     def camera(self):

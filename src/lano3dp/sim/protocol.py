@@ -14,6 +14,10 @@ open-vocabulary segmenter; `info` should carry "success" when the robot can tell
 Optional: `max_ee_step`, the metres the end effector moves at most in one step. Guided runs then predict the
 path the arm really takes through a chunk (it chases each waypoint at that pace) when they check and repair
 the chunk; without it every waypoint is assumed reached.
+
+Optional: `other_views()`, this moment seen from the env's other calibrated cameras (a list of RGBDFrame). The
+runtime asks for them only when the observation camera cannot see a target or an obstacle in an episode's first
+frame (an obstacle in front of it), and takes that object's cloud from the view that sees most of it.
 """
 
 from __future__ import annotations

@@ -71,6 +71,8 @@ class CameraPose:
 # rotated ~30 degrees about the vertical axis through the workspace centre and raised 10 cm.
 FRONT_CAMERA = CameraPose("front", position=(1.0, 0.0, 0.72), target=(0.42, 0.0, 0.10), fovy=45.0)
 SHIFTED_CAMERA = CameraPose("front", position=(0.93, 0.35, 0.80), target=(0.42, 0.0, 0.10), fovy=45.0)
+# Its mirror image: with SHIFTED_CAMERA, a second look at what an obstacle hides from the front (env.other_views).
+SHIFTED_LEFT_CAMERA = CameraPose("front", position=(0.93, -0.35, 0.80), target=(0.42, 0.0, 0.10), fovy=45.0)
 
 
 @dataclass(frozen=True)

@@ -738,8 +738,10 @@ class EpisodeResult:
         held_radius: m, the held extent used in Q*.
         held_clouds: target clouds carried over from the previous frame because the target was hidden.
         partly_hidden: targets whose first-frame cloud came from the few points an obstacle left in view.
-        seen_from_other_views: targets and obstacles the observation camera missed in the first frame, found in the
-            env's other views.
+        seen_from_other_views: targets and obstacles the observation camera could not see in the first frame,
+            found in the env's other views.
+        stale_obstacle_fits: re-fits (`refit_every_chunk`) that kept the last fit because the camera saw too little
+            of an obstacle.
         targets: phrase -> centroid (m) of each target's cloud in the first frame (object policies).
         error: why the episode ended early (perception failure, no clear chunk), or None.
         wall_s: wall time of the episode, seconds.
@@ -767,6 +769,7 @@ class EpisodeResult:
     held_clouds: int = 0
     partly_hidden: list[str] = field(default_factory=list)
     seen_from_other_views: list[str] = field(default_factory=list)
+    stale_obstacle_fits: int = 0
     targets: dict[str, list[float]] = field(default_factory=dict)
     error: str | None = None
     wall_s: float = 0.0
@@ -868,7 +871,7 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
                    if runner.obstacles is not None else []),
         gap_walls=[describe_obstacle(wall, "box") for wall in runner.gap_walls],
         held_radius=runner.held_radius, held_clouds=runner.held_clouds, partly_hidden=list(runner.partly_hidden),
-        seen_from_other_views=list(runner.seen_from_other_views),
+        seen_from_other_views=list(runner.seen_from_other_views), stale_obstacle_fits=runner.stale_obstacle_fits,
         targets=dict(runner.initial_targets), error=error,
         wall_s=time.perf_counter() - started,
         # The env latches stages, so its last info holds every stage reached in the episode.

@@ -540,18 +540,25 @@ class TwoCameraEnv(FakeEnv):
 
 
 def test_a_target_hidden_from_the_camera_in_the_first_frame_is_taken_from_another_view(observer):
-    """A wall between the camera and the bowl hides all of it; the camera across the table sees it, and the
-    bowl's cloud comes from there in every frame (it stays hidden) instead of failing the episode."""
-    wall = Box("obstacle_0", (BOWL.center_xy[0], -0.08), (0.24, 0.02, 0.30), {"kind": "box", "color": "grey",
-                                                                              "role": "obstacle"})
-    env = TwoCameraEnv([BOWL, PAN, wall], max_steps=6, success_radius=-1.0)
-    assert not np.isin(env.frame_.segmentation, env.frame_.instance_names["bowl"]).any()
-    assert np.isin(env.other_frame.segmentation, env.other_frame.instance_names["bowl"]).sum() >= observer.min_points
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=2), obstacle_phrases=["obstacle_0"])
+    """A wall between the camera and the bowl hides all of it, and a low post between the two; the camera
+    across the table sees both. The bowl's cloud comes from there in every frame (it stays hidden), the post is
+    fitted from there, instead of failing the episode."""
+    obstacle = {"kind": "box", "color": "grey", "role": "obstacle"}
+    wall = Box("obstacle_0", (BOWL.center_xy[0], -0.08), (0.24, 0.02, 0.30), obstacle)
+    post = Box("obstacle_1", (BOWL.center_xy[0], -0.06), (0.10, 0.015, 0.06), obstacle)
+    env = TwoCameraEnv([BOWL, PAN, wall, post], max_steps=6, success_radius=-1.0)
+    for hidden in ("bowl", "obstacle_1"):
+        assert not np.isin(env.frame_.segmentation, env.frame_.instance_names[hidden]).any()
+        seen = np.isin(env.other_frame.segmentation, env.other_frame.instance_names[hidden]).sum()
+        assert seen >= observer.min_points
+    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=2),
+                          obstacle_phrases=["obstacle_0", "obstacle_1"])
     result = rollout(env, runner, seed=0, stop_on_success=False)
     assert result.error is None and result.steps == 6
-    assert result.seen_from_other_views == ["bowl"] and result.held_clouds == 0
-    assert env.other_views_rendered == result.steps  # once per frame the bowl is hidden in, not for the wall
+    assert result.seen_from_other_views == ["bowl", "obstacle_1"] and result.held_clouds == 0
+    assert len(result.obstacles) == 2 and abs(result.obstacles[1]["center"][1] + 0.06) < 0.02
+    # once per frame the bowl is hidden in, and once for the post's only fit (the wall is in view)
+    assert env.other_views_rendered == result.steps + 1
     # the other camera's cloud is the bowl's own, not the wall's
     assert np.linalg.norm(np.array(result.targets["bowl"][:2]) - BOWL.center_xy) < 0.06
 

@@ -146,8 +146,8 @@ class TabletopEnv(gym.Env):
         variation: "clean", axes joined by "+", an iterable of axes, or a `Variation`.
         camera: "front" (training), "shifted" or "shifted_left", or a `CameraPose`; the "camera" variation forces
             "shifted".
-        other_cameras: cameras `other_views` renders on request, for a target the observation camera cannot see;
-            any at the episode's observation camera is left out.
+        other_cameras: cameras `other_views` renders on request, for a target or obstacle the observation camera
+            cannot see; any at the episode's observation camera is left out.
         image_size: square image side in pixels (or (height, width)).
         render_rgb: also render the colour image (depth + segmentation are always rendered).
         control_hz: control rate (physics runs at 250 Hz, 4 ms steps; 1 / control_hz must be a multiple of 20 ms).
@@ -424,7 +424,7 @@ class TabletopEnv(gym.Env):
 
     def other_views(self) -> list[RGBDFrame]:
         """This moment seen from the other cameras (`other_cameras`), rendered now: they cost a render each,
-        so the runtime asks only when the observation camera cannot see a target."""
+        so the runtime asks only when the observation camera cannot see a target or an obstacle."""
         self._check_open()
         return [self._as_frame(self._renderer.render(self.data, name, rgb=self.render_rgb))
                 for name in self._other_cameras]

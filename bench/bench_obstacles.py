@@ -89,7 +89,7 @@ def held_still_steps(episode: dict) -> int:
 def failure_class(episode: dict) -> str | None:
     """Why an episode failed (None if it succeeded), from its error, contacts and the task's stages.
 
-    target not seen: perception found no target (e.g. the obstacle hid it in the first frame);
+    target not seen: perception found no target (e.g. the obstacle hid it from every camera in the first frame);
     touched the obstacle: a failure with contact (the path was blocked or the detour too narrow);
     path blocked: held still for PATH_BLOCKED_STEPS steps in a row or more, no chunk finding a clear way round;
     grasp missed: a task with a "grasped" stage that never got there (e.g. pushed off by the guidance);

@@ -561,6 +561,11 @@ def test_a_target_hidden_from_the_camera_in_the_first_frame_is_taken_from_anothe
     assert env.other_views_rendered == result.steps + 1
     # the other camera's cloud is the bowl's own, not the wall's
     assert np.linalg.norm(np.array(result.targets["bowl"][:2]) - BOWL.center_xy) < 0.06
+    # the paper's body measures the held bowl's extent before the grasp: from the other camera too
+    sphere = RuntimeConfig(n_action_steps=2, obstacle=ObstacleModel(body="sphere"))
+    result = rollout(env, PolicyRunner(FakePolicy(), observer, sphere, obstacle_phrases=["obstacle_0"],
+                                       held_object="bowl"), seed=0, stop_on_success=False)
+    assert result.error is None and 0.08 < result.held_radius < 0.16  # twice the bowl's fitted radius
 
     env_without = FakeEnv([BOWL, PAN, wall], max_steps=6)  # one camera: nowhere else to look
     result = rollout(env_without, PolicyRunner(FakePolicy(), observer), seed=0)

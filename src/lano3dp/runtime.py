@@ -460,7 +460,10 @@ class PolicyRunner:
             return float(model.held_radius)
         if not self.held_object:
             return model.gripper_radius
-        points = self.observer.observe(frame, [self.held_object]).points[0]
+        try:
+            points = self.observer.observe(frame, [self.held_object]).points[0]
+        except PerceptionError as hidden:  # measured before the grasp: the obstacle may stand in front of it
+            points = self._observe_in_other_views(self.held_object, hidden).points[0]
         radius = fit_cylinder(points).radius
         return max(model.gripper_radius, model.held_extent * radius)
 

@@ -72,6 +72,10 @@ OBSTACLE_SHAPES = BUILTIN_OBSTACLE_SHAPES
 # Points enough for a first-frame target cloud that an obstacle mostly hides (FPS repeats them to N): its
 # centroid is still the object's, where failing the episode would be certain.
 FIRST_FRAME_MIN_POINTS = 3
+# A hand held still this many chunks in a row follows the obstacles' boundary (PolicyRunner.follow_obstacles).
+FOLLOW_AFTER_HOLDS = 5
+FOLLOW_STEP_M = 0.03
+FOLLOW_MAX_STEPS = 40
 GRASP_FLAG = 10  # index of the grasp flag in the 11-D robot state
 _RECOMMENDED = GUIDANCE_PRESETS["recommended"]
 
@@ -138,6 +142,7 @@ class RuntimeConfig:
     push_turn: float = _RECOMMENDED.push_turn
     bridge_gaps: bool = _RECOMMENDED.bridge_gaps
     escape_when_inside: bool = _RECOMMENDED.escape_when_inside
+    follow_when_stuck: bool = True
     step_limit: float | None = None
     seed: int = 0
 
@@ -310,6 +315,9 @@ class PolicyRunner:
         self.other_views: Callable[[], Sequence[RGBDFrame]] | None = None
         self.seen_from_other_views: list[str] = []  # targets and obstacles the first frame missed, found there
         self.stale_obstacle_fits = 0  # re-fits skipped because the obstacle was out of view
+        self.held_in_a_row = 0  # chunks held still in a row (RuntimeConfig.follow_when_stuck)
+        self._following: list | None = None  # [side, steps] while following an obstacle's boundary
+        self.followed_steps = 0
         self._last_clouds: np.ndarray | None = None
         self._held_ball: tuple[np.ndarray, float] | None = None  # (offset from the EE, radius) of the held object
         self.initial_targets: dict[str, list[float]] = {}  # phrase -> centroid (m) in the first frame
@@ -337,6 +345,9 @@ class PolicyRunner:
         self.other_views = other_views
         self.seen_from_other_views = []
         self.stale_obstacle_fits = 0
+        self.held_in_a_row = 0
+        self._following = None
+        self.followed_steps = 0
         self._last_clouds = None
         self._held_ball = None
         self.initial_targets = {}
@@ -616,6 +627,12 @@ class PolicyRunner:
                 actions[0, 0, :9] = torch.as_tensor(np.asarray(state[:9]), dtype=actions.dtype)
                 if cfg.escape_when_inside:
                     actions[0, 0, :3] = self.retreat(state, path_cost).to(actions.dtype)
+                self.held_in_a_row += 1
+            else:
+                self.held_in_a_row = 0
+            if cfg.follow_when_stuck:
+                actions = self.follow_obstacles(actions, state, path_cost, chunk.trajectory[:, start:start + 1],
+                                                chunk.trajectory[0, -1, :3].detach().cpu().numpy())
         chunk = ActionChunk(actions, chunk.trajectory)
         record.trajectory = chunk.trajectory[0].detach().cpu().numpy().astype(np.float32)
         record.latency_s = time.perf_counter() - started
@@ -692,6 +709,59 @@ class PolicyRunner:
         steps = min(math.ceil(deficit / 0.01) + 1, 5)  # at most 5 cm: the arm's step limit, re-planned after
         moved, _ = push_clear(cost, here[None, None], clearance=required, iterations=steps)
         return moved[0, 0]
+
+    def follow_obstacles(self, actions: torch.Tensor, state: np.ndarray, cost: ExecutedPath, first: torch.Tensor,
+                         goal: np.ndarray) -> torch.Tensor:
+        """Bug-algorithm boundary following: a hand held still for FOLLOW_AFTER_HOLDS chunks in a row (a blocked
+        way: two obstacles, or the wall across their gap, between it and its target, the network aiming
+        through) steps FOLLOW_STEP_M at a time along the nearest obstacle, on the side of the chunk's end
+        (`goal`), until the straight way from the hand to that end keeps half the margin (at most
+        FOLLOW_MAX_STEPS steps). `actions`: the chunk's kept actions, returned unchanged when not following;
+        `first`: its first action, whose gripper a step keeps."""
+        margin = self.config.obstacle.margin
+        if self._following is None:
+            if self.held_in_a_row < FOLLOW_AFTER_HOLDS or cost.present_clearance() < margin / 2:
+                return actions
+            self._following = [None, 0]  # the side (tangent) taken, steps taken
+        here = torch.as_tensor(np.asarray(state[:3], dtype=np.float64))
+        with torch.no_grad():
+            way_clear = float(cost.clearance(torch.as_tensor(goal, dtype=torch.float64)[None, None]).min()) >= \
+                margin / 2
+        if way_clear or self._following[1] >= FOLLOW_MAX_STEPS:
+            self._following = None
+            return actions
+
+        def clearance_at(offset_xy: np.ndarray) -> float:
+            target = here.clone()
+            target[:2] += torch.as_tensor(offset_xy)
+            with torch.no_grad():
+                return float(cost.clearance(target[None, None]).min())
+
+        # away from the nearest obstacle: the clearance's gradient, by central differences over 5 mm
+        probe = 0.005
+        away = np.array([clearance_at(np.array([probe, 0.0])) - clearance_at(np.array([-probe, 0.0])),
+                         clearance_at(np.array([0.0, probe])) - clearance_at(np.array([0.0, -probe]))])
+        if np.linalg.norm(away) < 1e-9:
+            self._following = None
+            return actions
+        away /= np.linalg.norm(away)
+        tangent = np.array([-away[1], away[0]])
+        side = self._following[0]
+        if side is None:
+            side = 1.0 if tangent @ (np.asarray(goal[:2]) - here[:2].numpy()) >= 0 else -1.0
+        # hug the boundary at the margin: drift out when closer, in when farther
+        drift = 0.3 if cost.present_clearance() < margin else -0.3
+        step = side * tangent + drift * away
+        step = FOLLOW_STEP_M * step / np.linalg.norm(step)
+        if clearance_at(step) < margin / 2:
+            self._following = None
+            return actions
+        self._following = [side, self._following[1] + 1]
+        self.followed_steps += 1
+        moved = first.clone()
+        moved[0, 0, :9] = torch.as_tensor(np.asarray(state[:9]), dtype=moved.dtype)
+        moved[0, 0, :2] += torch.as_tensor(step, dtype=moved.dtype)
+        return moved
 
     def act(self, frame: RGBDFrame, state: np.ndarray) -> np.ndarray:
         """Observe, let the policy re-plan (through `plan`) when its queue is empty, and return the next (10,)

@@ -715,8 +715,8 @@ class PolicyRunner:
         """Bug-algorithm boundary following: a hand held still for FOLLOW_AFTER_HOLDS chunks in a row (a blocked
         way: two obstacles, or the wall across their gap, between it and its target, the network aiming
         through) steps FOLLOW_STEP_M at a time along the nearest obstacle, on the side of the chunk's end
-        (`goal`), until the straight way from the hand to that end keeps half the margin (at most
-        FOLLOW_MAX_STEPS steps). `actions`: the chunk's kept actions, returned unchanged when not following;
+        (`goal`), until the chunk's start runs and the straight way from the hand to its end keeps half the
+        margin (at most FOLLOW_MAX_STEPS steps). `actions`: the chunk's kept actions, returned unchanged when not following;
         `first`: its first action, whose gripper a step keeps."""
         margin = self.config.obstacle.margin
         if self._following is None:
@@ -727,7 +727,7 @@ class PolicyRunner:
         with torch.no_grad():
             way_clear = float(cost.clearance(torch.as_tensor(goal, dtype=torch.float64)[None, None]).min()) >= \
                 margin / 2
-        if way_clear or self._following[1] >= FOLLOW_MAX_STEPS:
+        if (way_clear and actions.shape[1] > 0) or self._following[1] >= FOLLOW_MAX_STEPS:
             self._following = None
             return actions
 

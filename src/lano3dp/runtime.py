@@ -76,6 +76,7 @@ FIRST_FRAME_MIN_POINTS = 3
 FOLLOW_AFTER_HOLDS = 5
 FOLLOW_STEP_M = 0.03
 FOLLOW_MAX_STEPS = 40
+FOLLOW_CLEARANCE = 0.75  # share of the margin a step keeps: headroom above the hold's half
 GRASP_FLAG = 10  # index of the grasp flag in the 11-D robot state
 _RECOMMENDED = GUIDANCE_PRESETS["recommended"]
 
@@ -716,18 +717,20 @@ class PolicyRunner:
         way: two obstacles, or the wall across their gap, between it and its target, the network aiming
         through) steps FOLLOW_STEP_M at a time along the nearest obstacle, on the side of the chunk's end
         (`goal`), until the chunk's start runs and the straight way from the hand to its end keeps half the
-        margin (at most FOLLOW_MAX_STEPS steps). `actions`: the chunk's kept actions, returned unchanged when not following;
-        `first`: its first action, whose gripper a step keeps."""
+        margin (at most FOLLOW_MAX_STEPS steps). `actions`: what the chunk would run, returned when not
+        following; `first`: its first action, whose gripper a step keeps."""
         margin = self.config.obstacle.margin
         if self._following is None:
             if self.held_in_a_row < FOLLOW_AFTER_HOLDS or cost.present_clearance() < margin / 2:
                 return actions
             self._following = [None, 0]  # the side (tangent) taken, steps taken
         here = torch.as_tensor(np.asarray(state[:3], dtype=np.float64))
+        # the straight way to the chunk's end, as waypoints the path cost can pose the body at
+        fractions = torch.arange(1, len(cost.node_offsets), dtype=torch.float64)[:, None] / (len(cost.node_offsets) - 1)
+        way = here + fractions * (torch.as_tensor(goal, dtype=torch.float64) - here)
         with torch.no_grad():
-            way_clear = float(cost.clearance(torch.as_tensor(goal, dtype=torch.float64)[None, None]).min()) >= \
-                margin / 2
-        if (way_clear and actions.shape[1] > 0) or self._following[1] >= FOLLOW_MAX_STEPS:
+            way_clear = float(cost.clearance(way[None]).min()) >= margin / 2
+        if (way_clear and self.held_in_a_row == 0) or self._following[1] >= FOLLOW_MAX_STEPS:
             self._following = None
             return actions
 
@@ -749,11 +752,14 @@ class PolicyRunner:
         side = self._following[0]
         if side is None:
             side = 1.0 if tangent @ (np.asarray(goal[:2]) - here[:2].numpy()) >= 0 else -1.0
-        # hug the boundary at the margin: drift out when closer, in when farther
+        # hug the boundary at the margin: drift out when closer, in when farther; bend out more round a tight curve
         drift = 0.3 if cost.present_clearance() < margin else -0.3
-        step = side * tangent + drift * away
-        step = FOLLOW_STEP_M * step / np.linalg.norm(step)
-        if clearance_at(step) < margin / 2:
+        for bend in (0.0, 0.5, 1.0):
+            step = side * tangent + (drift + bend) * away
+            step = FOLLOW_STEP_M * step / np.linalg.norm(step)
+            if clearance_at(step) >= FOLLOW_CLEARANCE * margin:
+                break
+        else:
             self._following = None
             return actions
         self._following = [side, self._following[1] + 1]

@@ -56,7 +56,8 @@ ROOT = Path(__file__).resolve().parent.parent
 SAMPLERS = {
     "none": {"guidance": "none"},
     "A_k": {"guidance": {"mode": "noisy", "anchored": False, "repair_steps": 0, "hold_unclear": False,
-                         "push_turn": 0.0, "bridge_gaps": False, "escape_when_inside": False, "tuned": False}},
+                         "push_turn": 0.0, "bridge_gaps": False, "escape_when_inside": False,
+                         "follow_when_stuck": False, "tuned": False}},
     "paper": {"guidance": asdict(GUIDANCE_PRESETS["paper"]), "scheduler": "ddpm", "steps": 100,
               "obstacle": {"body": "sphere"}},
     "default": {"guidance": "clean"},

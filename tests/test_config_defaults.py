@@ -32,6 +32,7 @@ GUIDANCE_OPTIONS = {"--guidance": "mode", "--rho": "rho", "--last-steps": "last_
                     "--hold-unclear/--no-hold-unclear": "hold_unclear", "--push-turn": "push_turn",
                     "--bridge-gaps/--no-bridge-gaps": "bridge_gaps",
                     "--escape-inside/--no-escape-inside": "escape_when_inside",
+                    "--follow-obstacles/--no-follow-obstacles": "follow_when_stuck",
                     "--checkpoint-guidance/--no-checkpoint-guidance": "tuned"}
 
 
@@ -134,7 +135,7 @@ def captured(monkeypatch):
 
 OPTIONS = ["--guidance", "clean", "--guidance-preset", "paper", "--rho", "2", "--guided-clip-range", "3",
            "--push-weight", "alpha_bar", "--checked", "--anchored", "--repair-steps", "5", "--hold-unclear",
-           "--push-turn", "30", "--no-bridge-gaps", "--no-escape-inside",
+           "--push-turn", "30", "--no-bridge-gaps", "--no-escape-inside", "--no-follow-obstacles",
            "--margin", "0.03", "--body", "sphere", "--held-radius", "0.05",
            "--refit-obstacles", "--obstacle-shape", "box", "--image-size", "96"]
 
@@ -150,10 +151,10 @@ def test_eval_and_run_options_map_onto_the_nested_settings(captured, tmp_path):
                                                    densify=1, guided_clip_range=3.0, push_weight="alpha_bar",
                                                    checked=True, anchored=True, repair_steps=5, hold_unclear=True,
                                                    push_turn=30.0, bridge_gaps=False, escape_when_inside=False,
-                                                   tuned=False, keep=config.guidance.keep)
+                                                   follow_when_stuck=False, tuned=False, keep=config.guidance.keep)
         assert set(config.guidance.keep) == {"rho", "guided_clip_range", "push_weight", "checked", "anchored",
                                              "repair_steps", "hold_unclear", "push_turn", "bridge_gaps",
-                                             "escape_when_inside"}
+                                             "escape_when_inside", "follow_when_stuck"}
         assert config.obstacle == ObstacleSettings(shape="box", margin=0.03, body="sphere", held_radius=0.05,
                                                    refit=True)
         assert config.perception == PerceptionSettings(image_size=96)

@@ -25,6 +25,7 @@ from lano3dp.perception.synthetic import Box, render_boxes, top_down_camera
 from lano3dp.policy import ActionChunk, ChunkedControl, PolicyConfig
 from lano3dp.policy.normalizer import LinearNormalizer
 from lano3dp.runtime import (
+    FOLLOW_MAX_STEPS,
     ClosedLoopError,
     ObstacleModel,
     PolicyRunner,
@@ -357,7 +358,8 @@ def test_a_chunk_predicted_to_collide_runs_only_its_clear_start_and_the_hand_hol
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
     weak = GuidanceConfig(mode="clean", scale=1e-6, last_steps=10)  # leaves the straight line through it
-    config = RuntimeConfig(guidance=weak, obstacle=model, repair_steps=0, hold_unclear=True)
+    config = RuntimeConfig(guidance=weak, obstacle=model, repair_steps=0, hold_unclear=True,
+                           follow_when_stuck=False)
     runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
     result = rollout(env, runner, seed=0)
     assert not result.collided and result.min_clearance > 0
@@ -368,6 +370,22 @@ def test_a_chunk_predicted_to_collide_runs_only_its_clear_start_and_the_hand_hol
     plain = PolicyRunner(FakePolicy(), observer, unguided, obstacle_phrases=["obstacle_0"])
     assert rollout(env, plain, seed=0).collided  # only guided chunks are checked: unguided runs stay the baseline
     assert all(c.executed is None for c in plain.chunks)
+
+
+def test_a_hand_held_at_an_obstacle_follows_its_boundary_round_it_and_then_the_policy_again(observer):
+    """The scene above, where the held hand never reached the pan: after FOLLOW_AFTER_HOLDS holds it steps
+    round the obstacle's side, keeping clear, until the policy's straight line to the pan runs."""
+    env = FakeEnv([BOWL, PAN, OBSTACLE], max_steps=60)
+    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
+    weak = GuidanceConfig(mode="clean", scale=1e-6, last_steps=10)
+    config = RuntimeConfig(guidance=weak, obstacle=model, repair_steps=0, hold_unclear=True)
+    assert config.follow_when_stuck  # the default
+    runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
+    result = rollout(env, runner, seed=0)
+    assert result.success and not result.collided and result.min_clearance > 0
+    assert 1 <= runner.followed_steps <= FOLLOW_MAX_STEPS
+    # it went round the side, not through: the path left the start-to-pan line by more than the obstacle's width
+    assert np.abs(result.ee_path[:, 1]).max() > OBSTACLE.size[1] / 2 + model.held_radius
 
 
 def test_checked_execution_resamples_with_guidance_until_the_chunk_is_clear(observer):

@@ -498,6 +498,7 @@ EVAL_FIELDS_BEFORE = {"body": "sphere"}
 # ... and the same for fields added to a settings section (every guided result before them ran without).
 SECTION_FIELDS_BEFORE = {"guidance": {"anchored": False, "repair_steps": 0, "hold_unclear": False,
                                        "push_turn": 0.0, "bridge_gaps": False, "escape_when_inside": False,
+                                       "follow_when_stuck": False,
                                        "tuned": False}}
 # Fields that moved from one settings section to another: (from, to, name); a5d5ae9 saved these two as obstacle
 # settings before they became guidance settings (tunable per policy).

@@ -120,6 +120,8 @@ class RuntimeConfig:
         escape_when_inside: with `hold_unclear`, a hand already closer than half the margin may execute the
             start of a chunk that gets it no closer, and steps straight out (`PolicyRunner.retreat`) when every
             chunk leads deeper, rather than hold still.
+        follow_when_stuck: with `hold_unclear`, a hand held still FOLLOW_AFTER_HOLDS chunks in a row follows the
+            nearest obstacle's boundary until its chunks run again with a clear way on (`follow_obstacles`).
         step_limit: metres the end effector moves at most per env step, which the executed path is predicted
             under (the built-in simulator's `max_ee_step`, filled in by evaluation and `run`; None: every
             waypoint is assumed reached).
@@ -143,7 +145,7 @@ class RuntimeConfig:
     push_turn: float = _RECOMMENDED.push_turn
     bridge_gaps: bool = _RECOMMENDED.bridge_gaps
     escape_when_inside: bool = _RECOMMENDED.escape_when_inside
-    follow_when_stuck: bool = True
+    follow_when_stuck: bool = _RECOMMENDED.follow_when_stuck
     step_limit: float | None = None
     seed: int = 0
 
@@ -186,7 +188,8 @@ class RuntimeConfig:
                    guide_when_needed=guidance.guide_when_needed, anchored=guidance.anchored,
                    repair_steps=guidance.repair_steps, hold_unclear=guidance.hold_unclear,
                    push_turn=guidance.push_turn, bridge_gaps=guidance.bridge_gaps,
-                   escape_when_inside=guidance.escape_when_inside, step_limit=step_limit, seed=seed)
+                   escape_when_inside=guidance.escape_when_inside, follow_when_stuck=guidance.follow_when_stuck,
+                   step_limit=step_limit, seed=seed)
 
     def to_dict(self) -> dict[str, Any]:
         data = asdict(self)
@@ -317,8 +320,8 @@ class PolicyRunner:
         self.seen_from_other_views: list[str] = []  # targets and obstacles the first frame missed, found there
         self.stale_obstacle_fits = 0  # re-fits skipped because the obstacle was out of view
         self.held_in_a_row = 0  # chunks held still in a row (RuntimeConfig.follow_when_stuck)
-        self._following: list | None = None  # [side, steps] while following an obstacle's boundary
-        self.followed_steps = 0
+        self._following: tuple[float | None, int] | None = None  # (side, steps) while following a boundary
+        self.followed_steps = 0  # steps taken along obstacle boundaries this episode
         self._last_clouds: np.ndarray | None = None
         self._held_ball: tuple[np.ndarray, float] | None = None  # (offset from the EE, radius) of the held object
         self.initial_targets: dict[str, list[float]] = {}  # phrase -> centroid (m) in the first frame
@@ -717,13 +720,13 @@ class PolicyRunner:
         way: two obstacles, or the wall across their gap, between it and its target, the network aiming
         through) steps FOLLOW_STEP_M at a time along the nearest obstacle, on the side of the chunk's end
         (`goal`), until the chunk's start runs and the straight way from the hand to its end keeps half the
-        margin (at most FOLLOW_MAX_STEPS steps). `actions`: what the chunk would run, returned when not
+        margin (FOLLOW_MAX_STEPS steps at a time). `actions`: what the chunk would run, returned when not
         following; `first`: its first action, whose gripper a step keeps."""
         margin = self.config.obstacle.margin
         if self._following is None:
             if self.held_in_a_row < FOLLOW_AFTER_HOLDS or cost.present_clearance() < margin / 2:
                 return actions
-            self._following = [None, 0]  # the side (tangent) taken, steps taken
+            self._following = (None, 0)
         here = torch.as_tensor(np.asarray(state[:3], dtype=np.float64))
         # the straight way to the chunk's end, as waypoints the path cost can pose the body at
         fractions = torch.arange(1, len(cost.node_offsets), dtype=torch.float64)[:, None] / (len(cost.node_offsets) - 1)
@@ -762,7 +765,7 @@ class PolicyRunner:
         else:
             self._following = None
             return actions
-        self._following = [side, self._following[1] + 1]
+        self._following = (side, self._following[1] + 1)
         self.followed_steps += 1
         moved = first.clone()
         moved[0, 0, :9] = torch.as_tensor(np.asarray(state[:9]), dtype=moved.dtype)
@@ -821,6 +824,7 @@ class EpisodeResult:
             found in the env's other views.
         stale_obstacle_fits: re-fits (`refit_every_chunk`) that kept the last fit because the camera saw too little
             of an obstacle.
+        followed_steps: steps the runtime took along obstacle boundaries (`PolicyRunner.follow_obstacles`).
         targets: phrase -> centroid (m) of each target's cloud in the first frame (object policies).
         error: why the episode ended early (perception failure, no clear chunk), or None.
         wall_s: wall time of the episode, seconds.
@@ -849,6 +853,7 @@ class EpisodeResult:
     partly_hidden: list[str] = field(default_factory=list)
     seen_from_other_views: list[str] = field(default_factory=list)
     stale_obstacle_fits: int = 0
+    followed_steps: int = 0
     targets: dict[str, list[float]] = field(default_factory=dict)
     error: str | None = None
     wall_s: float = 0.0
@@ -951,6 +956,7 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
         gap_walls=[describe_obstacle(wall, "box") for wall in runner.gap_walls],
         held_radius=runner.held_radius, held_clouds=runner.held_clouds, partly_hidden=list(runner.partly_hidden),
         seen_from_other_views=list(runner.seen_from_other_views), stale_obstacle_fits=runner.stale_obstacle_fits,
+        followed_steps=runner.followed_steps,
         targets=dict(runner.initial_targets), error=error,
         wall_s=time.perf_counter() - started,
         # The env latches stages, so its last info holds every stage reached in the episode.

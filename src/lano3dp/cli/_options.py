@@ -224,6 +224,10 @@ ESCAPE_INSIDE = typer.Option(None, "--escape-inside/--no-escape-inside",
                              help="With --hold-unclear, a hand already closer to an obstacle than the hold keeps (a "
                                   "moving obstacle came at it) moves where it gets no closer, or straight out, "
                                   f"instead of holding still (default: {_preset_values('escape_when_inside')}).")
+FOLLOW_OBSTACLES = typer.Option(None, "--follow-obstacles/--no-follow-obstacles",
+                                help="With --hold-unclear, a hand held still for several chunks in a row follows "
+                                     "the nearest obstacle's boundary until its chunks run again with a clear way "
+                                     f"on (default: {_preset_values('follow_when_stuck')}).")
 TUNED = typer.Option(None, "--checkpoint-guidance/--no-checkpoint-guidance",
                      help="Take the guidance the checkpoint was tuned with (its guidance.json) for every guidance "
                           "option not given here, or keep the preset's (default: "
@@ -289,7 +293,7 @@ GUIDANCE_OVERRIDES = {"rho": "rho", "last_steps": "last_steps", "metric_gradient
                       "guide_when_needed": "guide_when_needed", "anchored": "anchored",
                       "repair_steps": "repair_steps", "hold_unclear": "hold_unclear",
                       "push_turn": "push_turn", "bridge_gaps": "bridge_gaps", "escape_when_inside": "escape_inside",
-                      "tuned": "checkpoint_guidance"}
+                      "follow_when_stuck": "follow_obstacles", "tuned": "checkpoint_guidance"}
 
 
 def episode_settings(params: Mapping[str, Any]) -> tuple[GuidanceSettings, ObstacleSettings, PerceptionSettings]:

@@ -38,6 +38,7 @@ def run_command(
     push_turn: float = _options.PUSH_TURN,
     bridge_gaps: bool = _options.BRIDGE_GAPS,
     escape_inside: bool = _options.ESCAPE_INSIDE,
+    follow_obstacles: bool = _options.FOLLOW_OBSTACLES,
     checkpoint_guidance: bool = _options.TUNED,
     scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
     steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),

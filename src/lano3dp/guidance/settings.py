@@ -81,6 +81,10 @@ class GuidanceSettings:
         escape_when_inside: with `hold_unclear`, a hand already closer to an obstacle than the hold keeps (a
             moving obstacle came at it) executes the start of a chunk that gets no closer, or steps straight out
             when every chunk leads deeper, rather than holding still while the obstacle walks into it.
+        follow_when_stuck: with `hold_unclear`, a hand held still for several chunks in a row (a blocked way, the
+            network aiming through) follows the nearest obstacle's boundary, a step at a time, until its chunks
+            run again with a clear way to their end (`PolicyRunner.follow_obstacles`, the Bug algorithm's
+            boundary following).
         tuned: take the settings the checkpoint was tuned with (its `guidance.json`, see `tuned_for`) for
             every field not in `keep` (the paper preset: off, its form is fixed).
         keep: fields the user chose, which a checkpoint's tuning leaves as they are (the command line fills it
@@ -103,6 +107,7 @@ class GuidanceSettings:
     push_turn: float = 0.0
     bridge_gaps: bool = True
     escape_when_inside: bool = True
+    follow_when_stuck: bool = True
     tuned: bool = True
     keep: tuple[str, ...] = ()
 
@@ -200,7 +205,7 @@ GUIDANCE_PRESETS: dict[str, GuidanceSettings] = {
     # clear: add scheduler "ddpm", steps 100 and ObstacleSettings(body="sphere").
     "paper": GuidanceSettings(rho=4.0, last_steps=10, metric_gradient=False, densify=1, anchored=False,
                               repair_steps=0, hold_unclear=False, push_turn=0.0, bridge_gaps=False,
-                              escape_when_inside=False, tuned=False),
+                              escape_when_inside=False, follow_when_stuck=False, tuned=False),
 }
 
 

@@ -318,6 +318,7 @@ class PolicyRunner:
         # () -> this moment from the env's other cameras (its optional `other_views`), set per episode by `reset`
         self.other_views: Callable[[], Sequence[RGBDFrame]] | None = None
         self.seen_from_other_views: list[str] = []  # targets and obstacles the first frame missed, found there
+        self._rendered_views: tuple[int, list[RGBDFrame]] | None = None  # (step, other views rendered at it)
         self.stale_obstacle_fits = 0  # re-fits skipped because the obstacle was out of view
         self.held_in_a_row = 0  # chunks held still in a row (RuntimeConfig.follow_when_stuck)
         self._following: tuple[float | None, int] | None = None  # (side, steps) while following a boundary
@@ -348,6 +349,7 @@ class PolicyRunner:
         self.partly_hidden = []
         self.other_views = other_views
         self.seen_from_other_views = []
+        self._rendered_views = None
         self.stale_obstacle_fits = 0
         self.held_in_a_row = 0
         self._following = None
@@ -447,7 +449,7 @@ class PolicyRunner:
         """`phrase` from the other view that sees most of it (every instance with `instances`); raises `hidden`,
         the observation camera's error, when no view sees it or the env has no other views."""
         found = None
-        for view in self.other_views() if self.other_views is not None else ():
+        for view in self._views_now():
             try:
                 seen = (self.observer.observe_instances(view, [phrase]) if instances
                         else self.observer.observe(view, [phrase]))
@@ -460,6 +462,23 @@ class PolicyRunner:
         if phrase not in self.seen_from_other_views:
             self.seen_from_other_views.append(phrase)
         return found
+
+    def _views_now(self) -> list[RGBDFrame]:
+        """The env's other views of this step, rendered once however many objects are looked for in them."""
+        if self.other_views is None:
+            return []
+        if self._rendered_views is None or self._rendered_views[0] != self.step_count:
+            self._rendered_views = (self.step_count, list(self.other_views()))
+        return self._rendered_views[1]
+
+    def _observe_anywhere(self, frame: RGBDFrame, phrase: str, instances: bool = False) -> ObjectClouds:
+        """`phrase` in `frame` (every instance with `instances`), or in the other view that sees most of it
+        when the camera cannot see it."""
+        try:
+            return (self.observer.observe_instances(frame, [phrase]) if instances
+                    else self.observer.observe(frame, [phrase]))
+        except PerceptionError as hidden:
+            return self._observe_in_other_views(phrase, hidden, instances)
 
     def policy_input(self, frame: RGBDFrame, state: np.ndarray) -> dict[str, np.ndarray]:
         """One observation as `select_action` takes it: {visual key: (1, ...), "state": (1, 11)}."""
@@ -475,10 +494,8 @@ class PolicyRunner:
             return float(model.held_radius)
         if not self.held_object:
             return model.gripper_radius
-        try:
-            points = self.observer.observe(frame, [self.held_object]).points[0]
-        except PerceptionError as hidden:  # measured before the grasp: the obstacle may stand in front of it
-            points = self._observe_in_other_views(self.held_object, hidden).points[0]
+        # measured before the grasp: the obstacle may stand in front of it
+        points = self._observe_anywhere(frame, self.held_object).points[0]
         radius = fit_cylinder(points).radius
         return max(model.gripper_radius, model.held_extent * radius)
 
@@ -495,12 +512,8 @@ class PolicyRunner:
             if self.obstacles is not None:
                 raise  # a re-fit: the caller keeps the last fit
             # the first fit: an obstacle hidden behind another is looked for in the other views
-            clouds = []
-            for phrase in self.obstacle_phrases:
-                try:
-                    clouds.extend(self.observer.observe_instances(frame, [phrase]).points)
-                except PerceptionError as hidden:
-                    clouds.extend(self._observe_in_other_views(phrase, hidden, instances=True).points)
+            clouds = [points for phrase in self.obstacle_phrases
+                      for points in self._observe_anywhere(frame, phrase, instances=True).points]
         return ObstacleSet([self.config.obstacle.fit(points, self.held_radius if sphere else 0.0)
                             for points in clouds])
 

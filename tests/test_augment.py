@@ -68,3 +68,64 @@ def test_a_training_config_round_trips_its_augmentation():
     again = TrainConfig.from_dict(json.loads(config.to_json()))
     assert again.augment == AugmentConfig(shift=0.01)
     assert TrainConfig(data="d.zarr", out="run").augment is None
+
+
+def test_a_lift_moves_clouds_hand_and_actions_up_or_down_together_and_nothing_else():
+    batch = random_batch()
+    config = AugmentConfig(shift=0.0, yaw=0.0, jitter=0.0, dropout=0.0, lift=0.03)
+    moved = augment_batch(batch, "object_clouds", config, torch.Generator().manual_seed(3))
+    dz = moved["action"][:, 0, 2] - batch["action"][:, 0, 2]  # one lift per window
+    assert float(dz.abs().max()) <= 0.03 and float(dz.abs().max()) > 0.01 and bool((dz < 0).any() and (dz > 0).any())
+    torch.testing.assert_close(moved["action"][..., 2] - batch["action"][..., 2], dz[:, None].expand(-1, 16))
+    torch.testing.assert_close(moved["obs"]["state"][..., 2] - batch["obs"]["state"][..., 2], dz[:, None].expand(-1, 2))
+    clouds_dz = moved["obs"]["object_clouds"][..., 2] - batch["obs"]["object_clouds"][..., 2]
+    torch.testing.assert_close(clouds_dz, dz.view(-1, 1, 1, 1).expand_as(clouds_dz))
+    for key in ("action",):
+        torch.testing.assert_close(moved[key][..., [0, 1, *range(3, 10)]], batch[key][..., [0, 1, *range(3, 10)]])
+
+
+def test_without_a_lift_the_random_stream_is_the_one_recipes_were_trained_with():
+    batch = random_batch()
+    before = augment_batch(batch, "object_clouds", AugmentConfig(), torch.Generator().manual_seed(4))
+    after = augment_batch(batch, "object_clouds", AugmentConfig(lift=0.0), torch.Generator().manual_seed(4))
+    torch.testing.assert_close(before["action"], after["action"])
+    torch.testing.assert_close(before["obs"]["object_clouds"], after["obs"]["object_clouds"])
+
+
+def test_the_normaliser_range_covers_what_a_lift_reaches():
+    import numpy as np
+
+    from lano3dp.augment import widened_stats
+
+    stats = {key: {"min": np.zeros(dim), "max": np.ones(dim)} for key, dim in
+             (("action", 10), ("state", 11), ("object_clouds", 3))}
+    wide = widened_stats(stats, AugmentConfig(lift=0.03), "object_clouds")
+    for key in stats:
+        assert wide[key]["min"][2] == -0.03 and wide[key]["max"][2] == 1.03
+        np.testing.assert_array_equal(np.delete(wide[key]["min"], 2), np.delete(stats[key]["min"], 2))
+    assert stats["action"]["min"][2] == 0.0  # the caller's statistics are not changed
+    assert widened_stats(stats, AugmentConfig(), "object_clouds") is stats
+
+
+def test_a_stretch_scales_every_height_about_the_table_by_one_factor_per_window():
+    batch = random_batch()
+    config = AugmentConfig(shift=0.0, yaw=0.0, jitter=0.0, dropout=0.0, stretch=0.2)
+    moved = augment_batch(batch, "object_clouds", config, torch.Generator().manual_seed(5))
+    factor = moved["action"][:, 0, 2] / batch["action"][:, 0, 2]
+    assert float((factor - 1).abs().max()) <= 0.2 and float((factor - 1).abs().max()) > 0.05
+    torch.testing.assert_close(moved["action"][..., 2], batch["action"][..., 2] * factor[:, None])
+    torch.testing.assert_close(moved["obs"]["state"][..., 2], batch["obs"]["state"][..., 2] * factor[:, None])
+    torch.testing.assert_close(moved["obs"]["object_clouds"][..., 2],
+                               batch["obs"]["object_clouds"][..., 2] * factor.view(-1, 1, 1, 1))
+    torch.testing.assert_close(moved["action"][..., :2], batch["action"][..., :2])  # nothing moves sideways
+
+
+def test_the_normaliser_range_covers_what_a_stretch_reaches():
+    import numpy as np
+
+    from lano3dp.augment import widened_stats
+
+    stats = {key: {"min": np.full(dim, 0.06), "max": np.full(dim, 0.30)} for key, dim in
+             (("action", 10), ("state", 11), ("object_clouds", 3))}
+    wide = widened_stats(stats, AugmentConfig(stretch=0.2), "object_clouds")
+    assert wide["action"]["min"][2] == pytest.approx(0.048) and wide["action"]["max"][2] == pytest.approx(0.36)

@@ -37,9 +37,11 @@ def test_the_first_closing_step_is_where_the_command_passes_half():
 
 @pytest.mark.slow
 def test_the_packaged_policy_is_measured_against_the_expert(tmp_path):
-    out = tmp_path / "grasp.json"
-    _bench().main(["--task", "phone_on_base", "--episodes", "1", "--out", str(out)])
-    entry = json.loads(out.read_text())["entries"]["phone_on_base/packaged"]
-    assert entry["summary"]["episodes"] == 1 and entry["command"].startswith("OMP_NUM_THREADS=1 python bench/")
+    _bench().main(["--tasks", "phone_on_base", "--episodes", "1", "--out-dir", str(tmp_path)])
+    record = json.loads((tmp_path / "grasp_error.json").read_text())
+    entry = record["entries"]["phone_on_base/packaged"]
+    assert entry["summary"]["episodes"] == 1 and entry["episodes"][0]["seed"] == 1_000_000
+    assert record["kind"] == "grasp_error" and record["provenance"]["command"].startswith(
+        "python bench/bench_grasp_error.py --tasks phone_on_base")
     if entry["summary"]["closed"]:
         assert -90 <= entry["episodes"][0]["yaw_error_deg"] < 90

@@ -5,6 +5,7 @@ import json
 import pytest
 
 from bench_loader import load_bench
+from lano3dp.guidance.settings import load_guidance_tuning
 
 bench = load_bench("bench_guidance_tuning")
 
@@ -22,11 +23,13 @@ def test_the_most_successful_candidate_that_keeps_clear_wins_and_ties_go_to_the_
 
 
 def test_the_report_marks_the_chosen_candidate():
-    report = bench.markdown_report({"command": "python bench/bench_guidance_tuning.py", "tuning_seed": 3_000_000,
-                                    "rule": "r", "candidates": bench.CANDIDATES, "tasks": {"bowl_pour": {
+    candidates = {name: {"preset": "recommended", "overrides": changes} for name, changes in bench.CANDIDATES.items()}
+    report = bench.markdown_report({"tuning_seed": 3_000_000, "rule": "r", "candidates": candidates, "tasks": {
+                                    "bowl_pour": {
                                         "scores": scores(recommended=(50, 0), turned=(70, 2)), "chosen": "turned"}}})
     assert "| bowl_pour | **turned** | 70/100 (10%–90%) | 2/100 |" in report
     assert "| bowl_pour | recommended | 50/100" in report
+    assert "**turned_half** recommended {'cost.push_turn': 60.0, 'sampler.rho': 0.02}" in report
 
 
 def test_a_policy_given_is_tuned_and_its_winner_written_into_its_own_folder(tmp_path, monkeypatch):
@@ -37,16 +40,20 @@ def test_a_policy_given_is_tuned_and_its_winner_written_into_its_own_folder(tmp_
 
     def fake_eval_stage(config, command=None):
         evaluated.append(config.checkpoint)
-        guidance = config.guidance  # turned wins: 8 against 5 (preset) and 7 (turned_half, rho 0.02)
-        successes = 5 + 3 * (guidance.push_turn == 60.0) - (guidance.rho == 0.02)
+        assert config.guidance.preset == "recommended" and config.seed == 3_000_000
+        changes = config.guidance.overrides  # turned wins: 8 against 5 (preset) and 7 (turned_half, rho 0.02)
+        successes = 5 + 3 * (changes.get("cost.push_turn") == 60.0) - (changes.get("sampler.rho") == 0.02)
         return {"summary": {"episodes": 10, "successes": successes, "stage_rates": {}},
                 "episodes": [{"collided": False}] * 10}
 
     monkeypatch.setattr(bench, "eval_stage", fake_eval_stage)
     monkeypatch.setattr(bench, "packaged_checkpoint", lambda task: pytest.fail("the packaged policy was used"))
-    monkeypatch.setattr(bench, "ROOT", tmp_path)
-    (tmp_path / "results").mkdir()
     bench.main(["--tasks", "bowl_pour", "--policy", f"bowl_pour={folder}", "--episodes", "10", "--work",
-                str(tmp_path / "work"), "--write"])
+                str(tmp_path / "work"), "--out-dir", str(tmp_path / "results"), "--write"])
     assert set(evaluated) == {str(folder)}
-    assert json.loads((folder / "guidance.json").read_text())["settings"] == {"push_turn": 60.0}
+    saved = json.loads((folder / "guidance.json").read_text())
+    assert saved["preset"] == "recommended" and saved["overrides"] == {"cost.push_turn": 60.0}
+    assert load_guidance_tuning(folder).settings().cost.push_turn == 60.0  # it loads as the tuning it names
+    report = json.loads((tmp_path / "results" / "guidance_tuning.json").read_text())
+    assert report["kind"] == "guidance_tuning" and report["tasks"]["bowl_pour"]["chosen"] == "turned"
+    assert report["provenance"]["command"].startswith("python bench/bench_guidance_tuning.py --tasks bowl_pour")

@@ -42,7 +42,7 @@ def test_the_report_reads_curves_and_packaging_ships_the_final_checkpoint(tmp_pa
     fake_eval(work / "eval" / f"{run.name}_step4.json", 9, 10)
 
     args = bench.parse_args(["--tasks", "bowl_pour", "--recipes", "compact", "--work", str(work), "--report-only"])
-    report = {"command": "python bench/bench_learning.py ...", "when_utc": "now",
+    report = {"provenance": {"command": "python bench/bench_learning.py ...", "created_utc": "now"},
               "setup": {"demos": 2, "final_episodes": 10, "curve_episodes": 10, "evaluation": "clean"},
               **bench.collect_report(args, ["bowl_pour"], ["compact"], [0])}
     (cell,) = report["cells"]
@@ -54,6 +54,7 @@ def test_the_report_reads_curves_and_packaging_ships_the_final_checkpoint(tmp_pa
     folder = bench.package(args, cell, report)
     record = json.loads((folder / "record.json").read_text())
     assert record["success_rate"] == 0.9 and record["steps"] == 4
-    assert "--tasks bowl_pour --recipes compact --seeds 0" in record["made_by"]
+    assert "--tasks bowl_pour --recipes compact --train-seeds 0" in record["made_by"]
+    assert "--seed 1000000" in record["made_by"] and record["packaged_by"] == "python bench/bench_learning.py ..."
     assert DiffusionPolicy.from_pretrained(pretrained.packaged_checkpoint("bowl_pour")).config.extra["task"] == \
         "bowl_pour"

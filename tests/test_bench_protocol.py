@@ -1,92 +1,84 @@
-"""The protocol benchmark's table: runs missing from the work folder are shown as not run, never dropped."""
+"""The protocol benchmark: cells in a fixed order, current only at this behaviour version and configuration, and a
+report made from the committed cells alone."""
 
+from __future__ import annotations
 
-import pytest
+import json
 
 import bench_loader
+from lano3dp import provenance
 
 
 def load_bench():
     return bench_loader.load_bench("bench_protocol")
 
 
-def summary(successes: int, episodes: int = 20, **extra) -> dict:
-    return {"episodes": episodes, "episodes_with_obstacles": extra.pop("placed", None), "successes": successes,
-            "success_rate": successes / episodes, "collision_rate": extra.pop("collision", 0.0),
-            "mean_collision_steps": extra.pop("contact", 0.0), "safe_success_rate": successes / episodes,
-            "mean_min_clearance": extra.pop("clearance", None), "error_rate": 0.0, "latency_mean_s": 0.1}
-
-
-def test_report_marks_missing_runs_and_evaluations_as_not_run():
+def test_cells_cover_tasks_methods_and_seeds_seed_by_seed():
     bench = load_bench()
-    args = bench.parse_args(["--tasks", "open_drawer", "--variations", "clutter,camera", "--rho-sweep", "0.01",
-                             "--report-only"])
-    trained = {"method": bench.METHODS["objects"], "seed": 0, "parameters": 5_400_000, "steps": 2000,
-               "curve": [{"step": 1000, **summary(8)}, {"step": 2000, **summary(12)}],
-               "paper_best_k": 0.5, "best_k_used": 2, "final": {"step": 2000, **summary(12)},
-               "variations": {"clutter": summary(10), "camera": None},
-               "obstacle": {"no_guidance": summary(13, placed=18, collision=0.9, contact=19.8, clearance=-0.031),
-                            "guidance": summary(5, placed=18, collision=0.65, contact=0.95, clearance=-0.001)},
-               "obstacle_sweep": {"0.01": None}}
-    missing = {"method": bench.METHODS["scene"], "seed": 0, "not_run": True}
-    results = {"command": "python bench/bench_protocol.py --report-only", "machine": {"platform": "x", "note": "y"},
-               "tasks": {"open_drawer": {"objects/seed0": trained, "scene/seed0": missing}}}
-    text = bench.markdown_report(results, args)
-    assert "| Lan-o3dp (object clouds) | 0 | 5.40 M | 2000 | 50% (best 2) | 60% (39%–78%) | 50% | not run |" in text
-    assert "| DP3 (scene cloud) | 0 | – | – | not run | not run | not run | not run |" in text
-    assert "| guidance A_0\\|k, rho 0.01 | not run |" in text
-    assert "| no guidance | 20 | 18 | 65% | 90% | 19.8 | 65% | -3.1 cm |" in text
-    assert "Assembled by --report-only" in text
+    args = bench.parse_args(["--tasks", "open_drawer,put_item_in_drawer", "--methods", "objects,image",
+                             "--train-seeds", "0,1"])
+    names = [spec.name for spec in bench.cell_specs(args)]
+    assert names == ["open_drawer-objects-seed0", "open_drawer-image-seed0", "put_item_in_drawer-objects-seed0",
+                     "put_item_in_drawer-image-seed0", "open_drawer-objects-seed1", "open_drawer-image-seed1",
+                     "put_item_in_drawer-objects-seed1", "put_item_in_drawer-image-seed1"]
+    objects, image = bench.cell_specs(args)[2:4]
+    assert bench.cell_config(objects, args)["segmenters"] == ["sim", "error-model"]  # perception that can fail beside
+    assert bench.cell_config(image, args)["segmenters"] == ["sim"]  # an image policy segments nothing
+    assert bench.cell_config(objects, args)["obstacle_rows"] and bench.cell_config(objects, args)["cpu_minutes"] == 10
+    default = bench.parse_args([])
+    assert len(bench.cell_specs(default)) == 7 * 3 * 3  # the paper's seven tasks, three methods, three seeds
 
 
-def test_a_task_run_only_for_the_obstacle_test_has_no_variation_cells():
+def test_a_cell_is_current_only_at_this_behaviour_version_and_configuration(tmp_path, monkeypatch):
     bench = load_bench()
-    args = bench.parse_args(["--tasks", "open_drawer", "--obstacle-tasks", "put_item_in_drawer",
-                             "--variations", "clutter", "--report-only"])
-    assert args.obstacle_tasks == "put_item_in_drawer"
-    obstacle_only = {"method": bench.METHODS["objects"], "seed": 0, "not_run": True, "obstacle_only": True}
-    results = {"command": "c", "machine": {"platform": "x", "note": "y"},
-               "tasks": {"put_item_in_drawer": {"objects/seed0": obstacle_only}}}
-    assert "| Lan-o3dp (object clouds) | 0 | – | – | not run | not run | – |" in bench.markdown_report(results, args)
+    args = bench.parse_args(["--tasks", "open_drawer", "--methods", "scene", "--train-seeds", "0",
+                             "--out-dir", str(tmp_path)])
+    (spec,) = bench.cell_specs(args)
+    path = bench.cell_path(spec, args)
+    assert not bench.is_current(spec, args)
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps({"provenance": {"behaviour_version": provenance.BEHAVIOUR_VERSION},
+                                "config": bench.cell_config(spec, args)}))
+    assert bench.is_current(spec, args)
+    longer = bench.parse_args(["--tasks", "open_drawer", "--methods", "scene", "--train-seeds", "0",
+                               "--out-dir", str(tmp_path), "--minutes", "15"])
+    assert not bench.is_current(spec, longer)  # another budget: run again
+    monkeypatch.setattr(provenance, "BEHAVIOUR_VERSION", provenance.BEHAVIOUR_VERSION + 1)
+    assert not bench.is_current(spec, args)  # code that behaves otherwise: run again
 
 
-def entry(bench, method: str, seed: int, final: int, **variations: int | None) -> dict:
-    """A trained run with `final` successes of 20 and, per variation axis, its successes (None: not run)."""
-    return {"method": bench.METHODS[method], "seed": seed, "parameters": 5_400_000, "steps": 2000,
-            "curve": [{"step": 2000, **summary(final)}], "paper_best_k": final / 20, "best_k_used": 1,
-            "final": {"step": 2000, **summary(final)},
-            "variations": {axis: None if count is None else summary(count) for axis, count in variations.items()}}
+def cell_record(task, method, seed, finals, variations=None) -> dict:
+    successes, episodes = finals
+    final = {"step": 4000, "episodes": episodes, "successes": successes, "success_rate": successes / episodes,
+             "interval95": [0.1, 0.9], "collision_rate": 0.0, "episodes_with_obstacles": 0, "stage_rates": {}}
+    evaluations = {"curve_step1000": {**final, "step": 1000, "successes": 0, "success_rate": 0.0}, "final": final,
+                   **(variations or {})}
+    return {"schema": "lano3dp-results/1", "kind": "protocol_cell", "cell": f"{task}-{method}-seed{seed}",
+            "provenance": {"behaviour_version": provenance.BEHAVIOUR_VERSION, "command": "x"},
+            "config": {"task": task, "method": method, "train_seed": seed},
+            "training": {"cpu_minutes_budget": 10, "steps_reached": 4000, "cell_cpu_s_this_session": 900.0},
+            "evaluations": evaluations}
 
 
-def test_the_report_plots_success_with_intervals_and_the_generalisation_drops_and_links_both(tmp_path):
-    import matplotlib.image
-
+def test_the_report_is_made_from_committed_cells_with_seeds_spread_and_segmenters_side_by_side(tmp_path,
+                                                                                                  monkeypatch):
     bench = load_bench()
-    args = bench.parse_args(["--tasks", "open_drawer,close_microwave", "--variations", "clutter,camera",
-                             "--seeds", "0,1", "--results", str(tmp_path), "--tag", "_synthetic", "--report-only"])
-    results = {"command": "c", "machine": {"platform": "x", "note": "y"}, "tasks": {
-        "open_drawer": {"objects/seed0": entry(bench, "objects", 0, 16, clutter=12, camera=14),
-                        "objects/seed1": entry(bench, "objects", 1, 18, clutter=15, camera=18),
-                        "scene/seed0": entry(bench, "scene", 0, 10, clutter=4, camera=10),
-                        "scene/seed1": {"method": bench.METHODS["scene"], "seed": 1, "not_run": True}},
-        "close_microwave": {"objects/seed0": entry(bench, "objects", 0, 20, clutter=20, camera=19),
-                            "objects/seed1": entry(bench, "objects", 1, 19, clutter=17, camera=None)}}}
-
-    assert bench.success_cells(results) == {("open_drawer", bench.METHODS["objects"]): [(16, 20), (18, 20)],
-                                            ("open_drawer", bench.METHODS["scene"]): [(10, 20)],
-                                            ("close_microwave", bench.METHODS["objects"]): [(20, 20), (19, 20)]}
-    drops = bench.variation_drops(results)
-    assert drops[bench.METHODS["objects"]]["clutter"] == pytest.approx([0.2, 0.15, 0.0, 0.1])
-    assert drops[bench.METHODS["objects"]]["camera"] == pytest.approx([0.1, 0.0, 0.05])  # one camera not run
-    assert drops[bench.METHODS["scene"]] == {"clutter": pytest.approx([0.3]), "camera": [0.0]}
-
-    out_json, out_md = bench.write_report(results, args)
-    text = out_md.read_text()
-    assert "![final clean success per task and method, 95% Wilson intervals](protocol_synthetic_success.png)" in text
-    assert "![success lost under each scene change, per method](protocol_synthetic_drops.png)" in text
-    assert "| Lan-o3dp (object clouds) | +11 (4) | +5 (3) |" in text  # mean clean - varied, in points
-    assert "| DP3 (scene cloud) | +30 (1) | +0 (1) |" in text
-    for name in ("protocol_synthetic_success.png", "protocol_synthetic_drops.png"):
-        height, width, _ = matplotlib.image.imread(tmp_path / name).shape
-        assert width > 500 and height > 300
-    assert out_json == tmp_path / "protocol_synthetic.json"
+    clutter = {"clutter_sim": {"episodes": 20, "successes": 18, "success_rate": 0.9, "collision_rate": 0.0},
+               "clutter_error-model": {"episodes": 20, "successes": 12, "success_rate": 0.6, "collision_rate": 0.0}}
+    records = [cell_record("open_drawer", "objects", 0, (45, 50), clutter),
+               cell_record("open_drawer", "objects", 1, (40, 50), clutter),
+               cell_record("open_drawer", "image", 0, (20, 50))]
+    monkeypatch.setattr(bench, "committed_cells", lambda args: records)
+    args = bench.parse_args(["--tasks", "open_drawer", "--methods", "objects,image", "--train-seeds", "0,1",
+                             "--out-dir", str(tmp_path), "--report-only"])
+    out = bench.write_report(args)
+    written = json.loads(out.read_text())
+    objects = written["tasks"]["open_drawer"]["objects"]
+    assert abs(objects["mean_final"] - 0.85) < 1e-9 and abs(objects["spread_final"] - 0.05) < 1e-9
+    assert written["cells"] == 3 and written["cells_planned"] == 4 and written["cpu_hours"] == 0.75
+    page = out.with_suffix(".md").read_text()
+    assert "3 of 4 cells committed" in page
+    assert "Cells run by `x`: open_drawer-objects-seed0, open_drawer-objects-seed1, open_drawer-image-seed0." in page
+    assert "| open_drawer | Lan-o3dp (object clouds) | clutter_error-model | 60% (" in page  # both seeds pooled: 24/40
+    assert "| open_drawer | Lan-o3dp (object clouds) | clutter_sim | 90% (" in page
+    assert (tmp_path / "protocol_success.png").stat().st_size > 0

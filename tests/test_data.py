@@ -13,7 +13,7 @@ import pytest
 
 from lano3dp.data import EpisodeStore, SequenceDataset, split_episodes
 from lano3dp.data.sequence import window_indices
-from lano3dp.data.store import DatasetSchemaError
+from lano3dp.data.store import DatasetSchemaError, ZarrVersionError
 from lano3dp.errors import CorruptFileError
 
 
@@ -129,6 +129,19 @@ def test_a_damaged_store_names_the_file(tmp_path):
         EpisodeStore.open(other)
     with pytest.raises(FileNotFoundError, match="nowhere.zarr"):
         EpisodeStore.open(tmp_path / "nowhere.zarr")
+
+
+def test_a_zarr_too_old_for_the_store_is_refused_before_a_file_is_written(tmp_path, monkeypatch):
+    import zarr
+
+    EpisodeStore.create(tmp_path / "old.zarr").append_episode(make_episode(0, 3))
+    monkeypatch.setattr(zarr, "__version__", "2.18.7")
+    with pytest.raises(ZarrVersionError, match=r"new.zarr: episode stores need zarr >= 3\.0\.8, but zarr 2\.18\.7 is "
+                                               r"installed; pip install 'zarr>=3\.0\.8'"):
+        EpisodeStore.open_or_create(tmp_path / "new.zarr", {"skill": "reach"})
+    assert not (tmp_path / "new.zarr").exists()  # nothing left behind to be called corrupt later
+    with pytest.raises(ZarrVersionError, match="old.zarr: episode stores need zarr"):
+        EpisodeStore.open(tmp_path / "old.zarr")
 
 
 def test_windows_are_edge_padded_like_diffusion_policy(tmp_path):

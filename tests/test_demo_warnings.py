@@ -30,9 +30,11 @@ def test_a_short_run_is_called_under_trained_and_a_full_one_gets_no_warning(tmp_
 
 def test_the_report_describes_the_guidance_the_demo_ran():
     from lano3dp.cli.demo_cmd import describe_guidance
-    from lano3dp.guidance.settings import GUIDANCE_PRESETS
+    from lano3dp.guidance.settings import guidance_preset
 
-    paper = describe_guidance(GUIDANCE_PRESETS["paper"])
+    paper = describe_guidance(guidance_preset("paper"))
     assert "normalised action units" in paper and "S = 10" in paper and "on the waypoints" in paper
-    recommended = describe_guidance(GUIDANCE_PRESETS["recommended"])
+    assert "chunk filters" not in paper
+    recommended = describe_guidance(guidance_preset("recommended"))
     assert "in metres" in recommended and "densified" in recommended and "hand's present position" in recommended
+    assert "chunk filters repair, hold, escape, follow" in recommended

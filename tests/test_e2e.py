@@ -15,7 +15,7 @@ import pytest
 from typer.testing import CliRunner
 
 from lano3dp.cli import app
-from lano3dp.evaluate import SUMMARY_FIELDS
+from lano3dp.evaluation.results import SUMMARY_FIELDS
 
 pytestmark = pytest.mark.slow
 
@@ -44,13 +44,22 @@ def test_eval_cli_writes_results_with_the_documented_fields(trained):
     out = root / "results.json"
     result = CliRunner().invoke(app, [
         "eval", "--checkpoint", str(root / "run"), "--variation", "obstacle", "--episodes", "1", "--max-steps", "24",
-        "--guidance", "clean", "--rho", "0.5", "--video-dir", str(root / "videos"), "--out", str(out)])
+        "--guidance-preset", "recommended", "--set", "guidance.sampler.rho=0.5", "--video-dir", str(root / "videos"),
+        "--out", str(out)])
     assert result.exit_code == 0, result.output + repr(result.exception)
     data = json.loads(out.read_text())
 
-    assert data["command"].startswith(f"lano3dp eval --checkpoint {root / 'run'} --variation obstacle --episodes 1 ")
-    assert "--guidance clean" in data["command"] and "--no-checked" not in data["command"]
-    assert data["config"]["task"] is None and data["config"]["guidance"]["mode"] == "clean"
+    provenance = data["provenance"]
+    assert provenance["command"].startswith(f"lano3dp eval --checkpoint {root / 'run'} --variation obstacle "
+                                            "--episodes 1 ")
+    assert "--guidance-preset recommended" in provenance["command"] and "--overwrite" not in provenance["command"]
+    assert provenance["behaviour_version"] >= 1 and provenance["versions"]["torch"]
+    assert provenance["machine"]["cpu_count"] >= 1 and provenance["config"] == data["config"]
+    assert len(provenance["commit"]) == 40 and isinstance(provenance["dirty"], bool)  # a git checkout here
+    assert data["schema"] == "lano3dp-results/1" and data["kind"] == "eval"
+    assert data["config"]["task"] is None and data["config"]["guidance"] == {
+        "preset": "recommended", "overrides": {"sampler.rho": 0.5}}
+    assert data["guidance"]["sampler"]["rho"] == 0.5 and data["guidance"]["sampler"]["mode"] == "clean"
     assert data["checkpoint"] == str(checkpoint.resolve())
     assert data["policy"]["object_names"] == ["bowl", "pan"]
     assert set(SUMMARY_FIELDS) <= set(data["summary"])
@@ -82,18 +91,23 @@ def test_run_cli_plans_acts_and_writes_video_and_top_view(trained):
     out = root / "run_out"
     result = CliRunner().invoke(app, [
         "run", "pour the bowl into the pan and keep clear of the mug", "--checkpoint", str(root / "run"),
-        "--max-steps", "16", "--compare", "--out", str(out)])
+        "--max-steps", "16", "--scenes", "2", "--compare", "--out", str(out)])
     assert result.exit_code == 0, result.output + repr(result.exception)
     assert "plan: bowl_pour(bowl, pan); avoid mug" in result.output
+    assert "guided over 2 scene(s): success" in result.output and "unguided over 2 scene(s)" in result.output
     record = json.loads((out / "run.json").read_text())
     assert record["plan"]["skill"] == "bowl_pour" and record["variation"] == "obstacle"
     # the simulator has no mug: its obstacle stands in, and the user is told so
-    assert record["obstacles"] == ["obstacle_0"] and "'mug' not in the simulated scene" in record["notes"][0]
-    assert set(record["episodes"]) == {"guided", "unguided"}
-    for name, episode in record["episodes"].items():
-        assert episode["steps"] == 16 or episode["success"], name
-        assert (out / f"video_{name}.mp4").stat().st_size > 1000
-        assert set(episode["targets"]) == {"bowl", "pan"}
+    assert [scene["obstacles"] for scene in record["scenes"]] == [["obstacle_0"]] * 2
+    assert any("'mug' not in the simulated scene" in note for note in record["notes"])
+    assert set(record["episodes"]) == {"guided", "unguided"} and set(record["summary"]) == {"guided", "unguided"}
+    for name, episodes in record["episodes"].items():
+        assert [e["seed"] for e in episodes] == [scene["seed"] for scene in record["scenes"]]
+        for episode in episodes:
+            assert episode["steps"] == 16 or episode["success"], name
+            assert set(episode["targets"]) == {"bowl", "pan"}
+        assert (out / f"video_{name}.mp4").stat().st_size > 1000  # the first scene's
+        assert record["summary"][name]["episodes"] == 2
     assert (out / "top_view.png").read_bytes()[:4] == b"\x89PNG"
 
 

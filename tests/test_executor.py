@@ -1,9 +1,9 @@
 """The cell graph and its executors: dependency order, skipping what the work folder holds, failures that name
-their cell, the Ray extra's absence said in one line, and a reduced protocol whose report is the same whether
-this process, a process pool or a local Ray instance ran its cells.
+their cell, the Ray extra's absence said in one line, and a small real graph whose episodes are the same whether
+this process or a local Ray instance ran its cells.
 
-Cheap cells ("touch": write a file listing the inputs' contents) test the graph; the reduced protocol trains
-a tiny policy for 4 steps on 2 demonstrations and evaluates 12-step episodes, about 10 s a run.
+Cheap cells ("touch": write a file listing the inputs' contents) test the graph; the real graph trains a tiny
+policy for 4 steps on 2 demonstrations and evaluates 12-step episodes, about 10 s a run.
 """
 
 from __future__ import annotations
@@ -17,7 +17,6 @@ from pathlib import Path
 
 import pytest
 
-import bench_loader
 from lano3dp.executor import (
     Cell,
     CellFailedError,
@@ -114,73 +113,43 @@ def test_malformed_graphs_are_refused_with_what_is_wrong(tmp_path):
         LocalExecutor().run([touch_cell(tmp_path, "x")])
 
 
-def test_without_ray_the_ray_executor_says_how_to_install_it(monkeypatch, capsys):
-    monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` now raises ImportError
+def test_without_ray_the_ray_executor_says_how_to_install_it(monkeypatch):
+    monkeypatch.setitem(sys.modules, "ray", None)  # as if the extra were not installed
     with pytest.raises(RayNotInstalledError, match=r"pip install 'lano3dp\[ray\]'"):
         make_executor("ray")
-    bench = load_bench()
-    with pytest.raises(SystemExit) as caught:
-        bench.main(["--executor", "ray", "--tasks", "open_drawer", "--obstacle-tasks", ""])
-    message = str(caught.value)
-    assert message == "--executor ray: the Ray executor needs the optional extra: pip install 'lano3dp[ray]'"
-    assert "\n" not in message and "Traceback" not in capsys.readouterr().err
 
 
-# ---- the reduced protocol, by every executor ----------------------------------------------------------
-def load_bench():
-    return bench_loader.load_bench("bench_protocol")
+# ---- a small real graph (collect -> train -> evaluate), by every executor ---------------------------------
+def real_graph(folder: Path) -> list[Cell]:
+    """Two demonstrations, a tiny policy trained 4 steps, two 12-step evaluations of it: each built-in kind."""
+    from lano3dp.evaluation import EvalConfig, GuidanceChoice
+    from lano3dp.executor import collect_cell, eval_cell, train_cell
+
+    data, run = folder / "data.zarr", folder / "run"
+    policy = {"down_dims": [16, 32], "diffusion_step_embed_dim": 16, "n_groups": 4, "point_hidden_dims": [16],
+              "encoder_out": 16, "state_feature_dim": 16}
+    cells = [collect_cell("collect", "open_drawer", 2, data, image_size=64, n_points=32),
+             train_cell("train", data, run, steps=4, policy=policy, inputs=["collect"], batch_size=8, val_ratio=0.0)]
+    for variation in ("clean", "camera"):
+        config = EvalConfig(checkpoint=str(run), task="open_drawer", variation=variation, episodes=1, max_steps=12,
+                            guidance=GuidanceChoice("none", {"sampler.steps": 2}),
+                            out=str(folder / f"{variation}.json"))
+        cells.append(eval_cell(f"eval {variation}", config, inputs=["train"]))
+    return cells
 
 
-# One clean task with a camera variation, one obstacle task: every kind of cell, 11 in all.
-REDUCED = ["--tasks", "open_drawer", "--methods", "objects", "--demos", "2", "--points", "32", "--steps", "4",
-           "--eval-every", "2", "--episodes", "1", "--batch-size", "8", "--variations", "camera",
-           "--obstacle-tasks", "put_item_in_drawer", "--obstacle-episodes", "1", "--rho-sweep", "", "--tag", "_reduced"]
-
-
-def reduced_overrides(bench):
-    return bench.Overrides(
-        collect={"image_size": 64},
-        policy={"down_dims": [16, 32], "diffusion_step_embed_dim": 16, "n_groups": 4, "point_hidden_dims": [16],
-                "encoder_out": 16, "state_feature_dim": 16},
-        train={"val_ratio": 0.0}, eval={"max_steps": 12, "steps": 2})
-
-
-def run_reduced(bench, folder: Path, *executor: str) -> dict:
-    argv = [*REDUCED, "--work", str(folder / "work"), "--results", str(folder / "results"), *executor]
-    assert bench.main(argv, reduced_overrides(bench)) == 0
-    return json.loads((folder / "results" / "protocol_reduced.json").read_text())
-
-
-def numbers(results: dict, folder: Path) -> dict:
-    """The report's numbers: every entry, with the work folder's path and the timings taken out."""
-    def strip(value):
-        if isinstance(value, dict):
-            return {key: strip(item) for key, item in value.items() if key != "latency_mean_s"}
-        if isinstance(value, list):
-            return [strip(item) for item in value]
-        return value.replace(str(folder), "<folder>") if isinstance(value, str) else value
-
-    return strip(results["tasks"])
-
-
-def episode_paths(folder: Path) -> dict[str, list[float]]:
-    """Evaluation JSON -> its episodes' end-effector path lengths (m): what the trained policies did."""
-    evals = folder / "work" / "evals"
-    return {str(path.relative_to(evals)): [episode["path_length"] for episode in json.loads(path.read_text())
-                                            ["episodes"]] for path in sorted(evals.rglob("*.json"))}
+def path_lengths(folder: Path) -> dict[str, list[float]]:
+    return {variation: [e["path_length"] for e in json.loads((folder / f"{variation}.json").read_text())["episodes"]]
+            for variation in ("clean", "camera")}
 
 
 @pytest.mark.slow
 @pytest.mark.skipif(not HAVE_RAY, reason="ray not installed (pip install 'lano3dp[ray]')")
-def test_the_reduced_protocol_reports_the_same_numbers_locally_and_on_a_local_ray_instance(tmp_path):
+def test_a_real_graph_gives_the_same_episodes_locally_and_on_a_local_ray_instance(tmp_path):
     from lano3dp.executor import RayExecutor, start_ray
 
-    bench = load_bench()
-    local = run_reduced(bench, tmp_path / "local")
-    report = (tmp_path / "local" / "results" / "protocol_reduced.md").read_text()
-    assert "![final clean success per task and method" in report and "| Lan-o3dp (object clouds) | +0 (1) |" in report
-    assert (tmp_path / "local" / "results" / "protocol_reduced_success.png").stat().st_size > 0
-
+    local = LocalExecutor().run(real_graph(tmp_path / "local"))
+    assert len(local.executed) == 4
     assert start_ray(num_cpus=2)  # the test's instance; the executor joins it and leaves it running
     import ray
 
@@ -188,18 +157,12 @@ def test_the_reduced_protocol_reports_the_same_numbers_locally_and_on_a_local_ra
         assert os.environ["RAY_USAGE_STATS_ENABLED"] == "0"
         assert ray.util.get_node_ip_address() == "127.0.0.1"
         assert ray.get_runtime_context().gcs_address.startswith("127.0.0.1:")
-        assert ray.cluster_resources()["CPU"] == 2
-        on_ray = run_reduced(bench, tmp_path / "ray", "--executor", "ray")
-        assert ray.is_initialized()
+        on_ray = RayExecutor().run(real_graph(tmp_path / "ray"))
+        assert len(on_ray.executed) == 4
+        rerun = RayExecutor().run(real_graph(tmp_path / "ray"))
+        assert rerun.executed == () and len(rerun.skipped) == 4
     finally:
         ray.shutdown()
-
-    assert numbers(on_ray, tmp_path / "ray") == numbers(local, tmp_path / "local")
-    assert [entry["final"]["episodes"] for entry in on_ray["tasks"]["open_drawer"].values()] == [1]
-    paths = episode_paths(tmp_path / "local")
-    assert len(paths) == 7 and all(length > 0 for lengths in paths.values() for length in lengths)
-    assert episode_paths(tmp_path / "ray") == paths  # the same training and the same episodes, cell by cell
-
-    rerun = RayExecutor().run(bench.build_graph(bench.parse_args([*REDUCED, "--work", str(tmp_path / "ray" / "work")]),
-                                                reduced_overrides(bench)))
-    assert rerun.executed == () and len(rerun.skipped) == 11
+    # the same training and the same episodes, cell by cell
+    assert path_lengths(tmp_path / "ray") == path_lengths(tmp_path / "local")
+    assert all(length > 0 for lengths in path_lengths(tmp_path / "local").values() for length in lengths)

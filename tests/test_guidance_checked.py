@@ -2,7 +2,6 @@
 
 import pytest
 import torch
-from diffusers import DDIMScheduler
 
 from lano3dp.guidance import (
     CheckConfig,
@@ -16,6 +15,7 @@ from lano3dp.guidance import (
 )
 from lano3dp.guidance.analytic import GaussianPathPrior, straight_line
 from lano3dp.guidance.checked import NO_CLEAR_CHUNK
+from lano3dp.guidance.schedulers import DDIMScheduler
 
 HORIZON = 16
 LINE = straight_line([0.0, -0.8, 0.0], [0.0, 0.8, 0.0], HORIZON)

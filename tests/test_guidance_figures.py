@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 import torch
-from diffusers import DDIMScheduler
 from typer.testing import CliRunner
 
 from lano3dp.cli import app
 from lano3dp.guidance import Cylinder, GuidanceConfig, GuidanceMode, denoise
 from lano3dp.guidance.analytic import GaussianPathPrior, straight_line
 from lano3dp.guidance.diagnostics import DenoiseRecorder, evenly_spaced_timesteps, plot_trajectories_by_scale
+from lano3dp.guidance.schedulers import DDIMScheduler
 
 
 def test_recorder_keeps_chosen_steps_in_metric_units():

@@ -6,10 +6,10 @@ something to do.
 
 import pytest
 import torch
-from diffusers import DDIMScheduler, DDPMScheduler
 
 from lano3dp.guidance import Cylinder, GuidanceConfig, GuidanceError, GuidanceMode, denoise
 from lano3dp.guidance.analytic import GaussianPathPrior, straight_line
+from lano3dp.guidance.schedulers import DDIMScheduler, DDPMScheduler
 
 BATCH, HORIZON = 32, 16
 SHAPE = (BATCH, HORIZON, 3)
@@ -153,6 +153,7 @@ def test_guidance_errors_name_the_problem():
         sample("ddim", GuidanceConfig(GuidanceMode.CLEAN, 0.1, 10), cost=lambda a: a.sqrt().sum((1, 2)))
     with pytest.raises(ValueError, match="rho must be >= 0"):
         GuidanceConfig(GuidanceMode.CLEAN, -1.0)
-    sample_scheduler = DDIMScheduler(num_train_timesteps=100, prediction_type="sample")
+    diffusers = pytest.importorskip("diffusers")  # denoise also takes diffusers' schedulers: not theirs for x_0
+    sample_scheduler = diffusers.DDIMScheduler(num_train_timesteps=100, prediction_type="sample")
     with pytest.raises(ValueError, match="epsilon-prediction"):
         denoise(lambda a, t: a, sample_scheduler, SHAPE, num_inference_steps=10)

@@ -6,6 +6,7 @@ come from a script, so a test can make it return plausible but wrong plans.
 """
 
 import json
+import re
 import select
 import socket
 import threading
@@ -16,7 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from lano3dp.cli import app
-from lano3dp.language import InstructionNotUnderstoodError, OfflineDecomposer
+from lano3dp.language import InputRejectedError, InstructionNotUnderstoodError, OfflineDecomposer
 from lano3dp.language.llm import LLMConfig, LLMDecomposer, LLMFallbackWarning, LLMRefusedError
 
 
@@ -57,6 +58,8 @@ class LlamaCppStub:
                     return
                 if isinstance(item, tuple) and item[0] == "raw":  # an HTTP 200 whose body is not a completion
                     return self._send_bytes(200, item[1])
+                if isinstance(item, tuple) and item[0] == "drip":  # a body sent one byte per interval
+                    return self._drip(item[1], item[2])
                 if isinstance(item, tuple) and item[0] == "length":
                     finish, item = "length", item[1]
                 content = item if isinstance(item, str) else json.dumps(item)
@@ -66,6 +69,20 @@ class LlamaCppStub:
 
             def _send(self, status, payload):
                 self._send_bytes(status, json.dumps(payload).encode())
+
+            def _drip(self, data, interval):
+                stub.statuses.append(200)
+                self.send_response(200)
+                self.send_header("Content-Type", "application/json")
+                self.send_header("Content-Length", str(len(data)))
+                self.end_headers()
+                try:
+                    for k in range(len(data)):
+                        self.wfile.write(data[k : k + 1])
+                        self.wfile.flush()
+                        time.sleep(interval)
+                except (BrokenPipeError, ConnectionResetError):
+                    stub.hung_up.set()  # the client closed the connection: stop, as a server would
 
             def _send_bytes(self, status, data):
                 stub.statuses.append(status)
@@ -275,3 +292,107 @@ def test_model_text_is_data_never_code(llama):
     llama.script = [dict(RIGHT, code="__import__('os').system('touch pwned')"), RIGHT]
     outcome = llm(llama).decompose_with_report(INSTRUCTION)
     assert outcome.source == "llm_retry" and "code: Extra inputs are not permitted" in outcome.errors[0]
+
+
+# ---- issue 34: the endpoint's answer is bounded, and the plan meets the invariant -----------------------------
+
+
+def completion_bytes(content: str) -> bytes:
+    choice = {"index": 0, "message": {"role": "assistant", "content": content}, "finish_reason": "stop"}
+    completion = {"id": "c", "object": "chat.completion", "created": 0, "model": "m", "choices": [choice]}
+    return json.dumps(completion).encode()
+
+
+def test_an_html_page_with_http_200_takes_the_fallback_in_one_line(llama):
+    llama.script = [("raw", b"<!DOCTYPE html><html><body>" + b"Welcome to nginx! " * 500 + b"</body></html>")]
+    with pytest.warns(LLMFallbackWarning) as caught:
+        outcome = llm(llama).decompose_with_report(INSTRUCTION)
+    (message,) = [str(w.message) for w in caught]
+    assert "HTTP 200 with a body that is not JSON (9041 bytes, starting '<!DOCTYPE html><html><body>Welcome to ng')" \
+        in message
+    assert "\n" not in message and len(message) < 500
+    assert outcome.source == "offline_fallback"
+    assert outcome.plan.summary() == "bowl_pour(red bowl, pan); avoid kettle, mug"
+
+
+def test_a_server_dripping_bytes_cannot_hold_the_request_past_its_total_deadline(llama):
+    """Each byte arrives well within the timeout, so a per-read timeout never fires; the total one does."""
+    llama.script = [("drip", completion_bytes(json.dumps(RIGHT)), 0.05)]
+    start = time.monotonic()
+    with pytest.warns(LLMFallbackWarning, match="the reply was still arriving after the 1 s deadline"):
+        outcome = llm(llama, timeout=1.0).decompose_with_report(INSTRUCTION)
+    assert time.monotonic() - start < 2.5  # the whole reply would take ~14 s
+    assert outcome.source == "offline_fallback"
+    assert llama.hung_up.wait(2.0), "the connection was not closed"
+
+
+def test_a_reply_larger_than_a_plan_is_cut_off_and_refused(llama):
+    llama.script = [("raw", completion_bytes("x" * 100_000))]
+    with pytest.warns(LLMFallbackWarning, match="the reply exceeds 64 KiB; not a plan"):
+        assert llm(llama).decompose_with_report(INSTRUCTION).source == "offline_fallback"
+
+
+UNSAFE = [
+    (
+        "drops an object named only by a property",
+        "Put the bottle in the drawer, the glass is fragile",
+        reply("bottle_in_drawer", [ref("bottle"), ref("drawer")]),
+        "the instruction says to avoid 'glass' but the plan has no such obstacle",
+        "bottle_in_drawer(bottle, drawer); avoid glass",
+    ),
+    (
+        "drops a landmark",
+        "Open the drawer under the microwave",
+        reply("open_drawer", [ref("drawer")]),
+        "the instruction says to avoid 'microwave' but the plan has no such obstacle",
+        "open_drawer(drawer); avoid microwave",
+    ),
+    (
+        "invents an obstacle",
+        "Open the drawer",
+        reply("open_drawer", [ref("drawer")], [ref("vase")]),
+        "the plan avoids 'vase', which the instruction does not mention",
+        "open_drawer(drawer)",
+    ),
+    (
+        "chooses a skill the verb does not ask for",
+        "Put the bowl in the drawer",
+        reply("bowl_pour", [ref("bowl"), ref("pan")]),
+        "the instruction's verbs ('put', 'put in') ask for bottle_in_drawer, phone_on_base",
+        "put_item_in_drawer(bowl, drawer)",
+    ),
+]
+
+
+@pytest.mark.parametrize(("what", "instruction", "wrong", "problem", "fallback"), UNSAFE, ids=[u[0] for u in UNSAFE])
+def test_a_model_plan_that_breaks_the_invariant_is_refused_never_passed(llama, what, instruction, wrong, problem,
+                                                                        fallback):
+    llama.script = [wrong, wrong]
+    with pytest.warns(LLMFallbackWarning) as caught:
+        outcome = llm(llama).decompose_with_report(instruction)
+    assert problem in str(caught[0].message)
+    assert outcome.source == "offline_fallback" and outcome.plan.summary() == fallback
+    retry = llama.requests[-1]["messages"]
+    assert [m["role"] for m in retry] == ["system", "user", "user"]  # the problem, not the reply, goes back
+    assert problem in retry[-1]["content"] and json.dumps(wrong) not in retry[-1]["content"]
+
+
+@pytest.mark.parametrize(("instruction", "reason"), [
+    ("Don't open the drawer", "'don't open the drawer' asks the robot not to do something"),
+    ("Open the drawer and put the block in it", "it asks for two tasks"),
+    ("Smash the bowl into the pan", "the instruction has no verb that asks for bowl_pour"),
+])
+def test_a_model_cannot_plan_what_the_instruction_refuses(llama, instruction, reason):
+    planned = {"Don't open the drawer": reply("open_drawer", [ref("drawer")]),
+               "Open the drawer and put the block in it": reply("put_item_in_drawer", [ref("block"), ref("drawer")]),
+               "Smash the bowl into the pan": reply("bowl_pour", [ref("bowl"), ref("pan")])}[instruction]
+    llama.script = [planned, planned]
+    with pytest.warns(LLMFallbackWarning, match=re.escape(reason)):
+        with pytest.raises(InstructionNotUnderstoodError):
+            llm(llama).decompose_with_report(instruction)
+
+
+def test_an_instruction_refused_as_input_is_never_sent(llama):
+    with pytest.raises(InputRejectedError, match="at most 1,000 are accepted"):
+        llm(llama).decompose_with_report("open the drawer " * 10_000)
+    assert llama.requests == []

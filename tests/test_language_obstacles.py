@@ -8,7 +8,12 @@ import re
 
 import pytest
 
-from lano3dp.language import InstructionNotUnderstoodError, OfflineDecomposer, UncertainObstacleError
+from lano3dp.language import (
+    ContradictionError,
+    InstructionNotUnderstoodError,
+    OfflineDecomposer,
+    UncertainObstacleError,
+)
 
 
 @pytest.fixture(scope="module")
@@ -119,11 +124,18 @@ def test_a_pronoun_that_can_only_mean_a_target_is_no_obstacle_and_warns(decompos
     assert plan.warnings == ["'don't spill it' can only mean a target (bowl, pan); a target is never made an obstacle"]
 
 
-def test_a_named_target_said_to_be_avoided_stays_a_target_and_warns(decomposer):
-    plan = decomposer.decompose("Put the bottle in the drawer without touching the bottle")
+def test_a_named_target_said_to_be_avoided_is_a_contradiction_refused(decomposer):
+    """Issue 34: the robot cannot carry the bottle without touching it; which one the user meant is not guessed."""
+    with pytest.raises(ContradictionError, match=re.escape(
+        "'bottle' is the object bottle_in_drawer acts on, and 'without touching' says to keep away from it"
+    )):
+        decomposer.decompose("Put the bottle in the drawer without touching the bottle")
+    # Care with a target is no contradiction: the plan keeps it as a target and says so.
+    plan = decomposer.decompose("Put the bottle in the drawer; the bottle is fragile")
     assert (plan.skill, plan.target_phrases, plan.obstacles) == ("bottle_in_drawer", ["bottle", "drawer"], [])
     assert plan.warnings == [
-        "'bottle' is said to be avoided but is the target bottle of bottle_in_drawer; it is not made an obstacle"
+        "'bottle' is said to be handled with care ('the bottle is fragile') and is the target bottle of "
+        "bottle_in_drawer; it is not made an obstacle"
     ]
 
 
@@ -209,10 +221,11 @@ def test_between_the_targets_is_on_the_path(decomposer):
     assert reading(decomposer, "There's a mug between the bowl and the pan; pour the bowl into the pan.") == (
         "bowl_pour", ["bowl", "pan"], ["mug"],
     )  # fmt: skip
-    # "next to" only says where something is; it declares nothing unless a cue refers back to it.
-    assert reading(decomposer, "There's a mug next to the bowl; pour the bowl into the pan.") == (
-        "bowl_pour", ["bowl", "pan"], [],
-    )  # fmt: skip
+    # "next to" only says where something is; the mug is still named, so it is avoided (issue 34), and a warning
+    # says the plan added it.
+    plan = decomposer.decompose("There's a mug next to the bowl; pour the bowl into the pan.")
+    assert (plan.skill, plan.target_phrases, plan.obstacle_phrases) == ("bowl_pour", ["bowl", "pan"], ["mug"])
+    assert plan.warnings == ["'mug' is named but is neither acted on nor said to be avoided; it is avoided"]
 
 
 def test_a_list_after_there_is_and_a_clause_before_a_plural_subject(decomposer):
@@ -262,8 +275,9 @@ NONSENSE = [
     ("Sweep the bowl into the pan", "'sweep' is not how bowl_pour is asked for"),
     ("Pour the pan into the bowl", "it asks to move things into the bowl, but bowl_pour carries the bowl to the pan"),
     ("Put the microwave in the drawer", "'microwave' cannot be carried by put_item_in_drawer"),
-    ("Take the block out of the drawer", "it asks to take something out of or off the drawer"),
+    ("Take the block out of the drawer", "'take' is not a verb any skill is asked for with"),
     ("Take the phone off the base", "it asks to take something out of or off the base"),
+    ("Put the block out of the drawer", "it asks to take something out of or off the drawer"),
 ]
 
 
@@ -273,10 +287,14 @@ def test_a_task_object_the_skill_cannot_take_is_refused_not_swapped_for_its_slot
         decomposer.decompose(instruction)
 
 
-def test_landmarks_and_other_sentences_are_not_task_objects(decomposer):
-    assert reading(decomposer, "Open the drawer under the microwave") == ("open_drawer", ["drawer"], [])
-    assert reading(decomposer, "Pour the bowl into the pan next to the plant") == ("bowl_pour", ["bowl", "pan"], [])
-    assert reading(decomposer, "There's a bowl next to the drawer. Open the drawer.") == ("open_drawer", ["drawer"], [])
+def test_landmarks_and_other_sentences_are_not_task_objects_but_are_avoided(decomposer):
+    assert reading(decomposer, "Open the drawer under the microwave") == ("open_drawer", ["drawer"], ["microwave"])
+    assert reading(decomposer, "Pour the bowl into the pan next to the plant") == (
+        "bowl_pour", ["bowl", "pan"], ["plant"],
+    )  # fmt: skip
+    assert reading(decomposer, "There's a bowl next to the drawer. Open the drawer.") == (
+        "open_drawer", ["drawer"], ["bowl"],
+    )  # fmt: skip
 
 
 def test_what_a_warning_is_about_is_an_obstacle(decomposer):

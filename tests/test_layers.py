@@ -2,8 +2,8 @@
 
 Layers, lowest first (README "Design", docs/architecture.md): errors, registry, video, jsonio, geometry,
 vocabulary < data, perception, language, guidance, policy, mujoco_frame, wrappers < sim < runtime, train, evaluate,
-collect, env_factory, pipeline, executor, augment, locking, report < cli. Modules of one layer may import one another
-(policy uses guidance's sampler).
+collect, env_factory, pipeline, executor, augment, locking, report, recording < cli. Modules of one layer may import
+one another (policy uses guidance's sampler).
 """
 
 from __future__ import annotations
@@ -13,11 +13,11 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "lano3dp"
 LAYERS = (
-    ("errors", "registry", "video", "jsonio", "geometry", "vocabulary"),
+    ("errors", "registry", "video", "jsonio", "config_tree", "provenance", "geometry", "vocabulary"),
     ("data", "perception", "language", "guidance", "policy", "mujoco_frame", "wrappers"),
     ("sim",),
-    ("runtime", "train", "evaluate", "collect", "env_factory", "pipeline", "executor", "augment", "locking",
-     "report"),
+    ("runtime", "train", "evaluation", "collect", "env_factory", "pipeline", "executor", "augment", "locking",
+     "report", "recording", "migrate"),
     ("cli",),
 )
 RANK = {part: rank for rank, parts in enumerate(LAYERS) for part in parts}

@@ -126,9 +126,11 @@ def test_malformed_reply_gets_one_retry_with_the_error(fake_llm):
     assert outcome.plan == expected_plan() and outcome.source == "llm_retry"
     assert len(fake_llm.requests) == 2
     retry_messages = fake_llm.requests[1]["messages"]
-    assert retry_messages[2] == {"role": "assistant", "content": "Sure! Here is the plan: pour the bowl"}
-    assert retry_messages[3]["content"].startswith("That plan is invalid: the reply does not match the schema")
-    assert "Invalid JSON" in retry_messages[3]["content"]
+    assert [m["role"] for m in retry_messages] == ["system", "user", "user"]  # the invalid reply is not sent back
+    assert retry_messages[2]["content"].startswith(
+        "Your previous plan was invalid: the reply does not match the schema"
+    )
+    assert "Invalid JSON" in retry_messages[2]["content"] and "Sure!" not in retry_messages[2]["content"]
 
 
 def test_unknown_skill_is_corrected_by_the_retry(fake_llm):

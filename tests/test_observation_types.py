@@ -23,8 +23,9 @@ from lano3dp.cli import app
 from lano3dp.collect import collect_from_env
 from lano3dp.data import EpisodeStore
 from lano3dp.env_factory import load_factory
-from lano3dp.evaluate import observation_types_for_workers
+from lano3dp.evaluation import GuidanceChoice, PerceptionSettings
 from lano3dp.geometry.rotations import matrix_to_rot6d
+from lano3dp.guidance.settings import guidance_preset
 from lano3dp.policy import (
     DiffusionPolicy,
     ObservationType,
@@ -35,6 +36,7 @@ from lano3dp.policy import (
     register_observation_type,
     unregister_observation_type,
 )
+from lano3dp.policy.observations import observation_type_for_workers as observation_types_for_workers
 from lano3dp.train import TrainConfig, policy_config_for_dataset, train
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -130,8 +132,9 @@ def test_a_type_defined_outside_the_package_is_recorded_trained_saved_and_acts(o
     assert torch.isfinite(chunk.trajectory).all()
 
     # in the env through evaluate: the runner makes each step's input with the type's runtime_input
-    results = evaluate(EvalConfig(checkpoint=str(final), env=ENV, episodes=1, max_steps=3, steps=2,
-                                  guidance="none", perception={"image_size": 48}))
+    results = evaluate(EvalConfig(checkpoint=str(final), env=ENV, episodes=1, max_steps=3,
+                                  guidance=GuidanceChoice("none", {"sampler.steps": 2}),
+                                  perception=PerceptionSettings(image_size=48)))
     (record,) = results["episodes"]
     assert results["policy"]["obs_type"] == "object_tops"
     assert record["error"] is None and record["steps"] == 3 and len(record["chunk_latency_s"]) >= 1
@@ -151,27 +154,34 @@ def test_the_built_in_types_are_registry_entries():
 
 
 def test_an_unknown_obs_type_is_one_error_naming_the_registered_ones(object_tops, tmp_path):
-    with pytest.raises(ValueError, match=r"unknown obs_type 'lidar'; registered: objects, scene, image, object_tops"):
+    with pytest.raises(ValueError, match=r"unknown obs_type 'lidar'; registered: objects, scene, image, goal, "
+                                         r"object_tops"):
         PolicyConfig(obs_type="lidar")
-    with pytest.raises(UnknownObservationTypeError, match="registered: objects, scene, image, object_tops"):
+    with pytest.raises(UnknownObservationTypeError, match="registered: objects, scene, image, goal, object_tops"):
         get_observation_type("lidar")
     result = CliRunner().invoke(app, ["train", "--data", str(tmp_path), "--out", str(tmp_path / "run"),
                                       "--obs-type", "lidar"])
     assert result.exit_code == 2 and "unknown obs_type 'lidar'" in result.output
 
 
-def test_eval_workers_get_the_registered_type(object_tops, monkeypatch):
-    import lano3dp.evaluate as evaluate_module
+def test_eval_workers_get_the_registered_type(object_tops):
+    import queue
+
+    from lano3dp.evaluation.pool import Job, _worker_main
 
     assert observation_types_for_workers("objects") == {}
     # spawned eval workers start with the built-in types: the parent's registered one travels to them pickled
     payloads = observation_types_for_workers("object_tops")
     assert isinstance(pickle.loads(payloads["object_tops"]), ObjectTops)
     unregister_observation_type("object_tops")
-    monkeypatch.setattr(evaluate_module, "_WORKER_ERROR", None)
-    evaluate_module._worker_init({"checkpoint": "no-such-run"}, {}, payloads)
+    todo, done = queue.Queue(), queue.Queue()
+    for job in (Job(0, 7), None):
+        todo.put(job)
+    _worker_main({"checkpoint": "no-such-run"}, guidance_preset("none").to_dict(),
+                 {"shapes": {}, "observation_types": payloads, "filters": {}}, todo, done)
     assert isinstance(get_observation_type("object_tops"), ObjectTops)
-    assert isinstance(evaluate_module._WORKER_ERROR, FileNotFoundError)  # what stopped it: the missing checkpoint
+    index, record, error = done.get_nowait()  # what stopped it, reported with the job: the missing checkpoint
+    assert (index, record) == (0, None) and error.startswith("FileNotFoundError")
 
     class Local(ObjectTops):  # defined inside a function: a worker could not import it
         pass

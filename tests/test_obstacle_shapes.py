@@ -1,11 +1,10 @@
 """Obstacle shapes as a registry (guidance.shapes): a shape added from outside the package, in this file alone,
-is fitted, described and drawn, chosen by ObstacleModel, EvalConfig and `lano3dp eval/run --obstacle-shape`; the
+is fitted, described and drawn, chosen by ObstacleSettings and `--set guidance.obstacles.shape=NAME`; the
 built-in shapes keep their numbers; unknown names fail in one line naming the registered ones."""
 
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
 
 import matplotlib
 
@@ -19,9 +18,8 @@ from typer.testing import CliRunner  # noqa: E402
 
 from lano3dp.cli import app  # noqa: E402
 from lano3dp.errors import EmptyCloudError  # noqa: E402
-from lano3dp.evaluate import EvalConfig, RunConfig, runtime_config, shapes_for_workers  # noqa: E402
+from lano3dp.evaluation import EvalConfig, GuidanceChoice  # noqa: E402
 from lano3dp.guidance import (  # noqa: E402
-    GuidanceConfig,
     ObstacleSettings,
     ObstacleShape,
     Sphere,
@@ -33,9 +31,10 @@ from lano3dp.guidance import (  # noqa: E402
     register_obstacle_shape,
     unregister_obstacle_shape,
 )
-from lano3dp.guidance.shapes import draw_obstacle  # noqa: E402
+from lano3dp.guidance.obstacles import fit_obstacle_shape  # noqa: E402
+from lano3dp.guidance.settings import guidance_preset  # noqa: E402
+from lano3dp.guidance.shapes import describe_obstacle, draw_obstacle, shape_for_workers  # noqa: E402
 from lano3dp.report import plot_top_view  # noqa: E402
-from lano3dp.runtime import ObstacleModel, describe_obstacle  # noqa: E402
 
 CENTER, RADIUS = np.array([0.40, 0.10, 0.20]), 0.05
 
@@ -87,10 +86,10 @@ def at(*xyz) -> torch.Tensor:
     return torch.tensor([[list(xyz)]], dtype=torch.float64)  # (B=1, T=1, 3)
 
 
-def test_a_shape_registered_from_outside_is_fitted_by_the_obstacle_model(ball):
+def test_a_shape_registered_from_outside_is_fitted_as_the_settings_name_it(ball):
     assert obstacle_shape_names() == ("cylinder", "box", "points", "sphere")
-    model = ObstacleModel(shape="sphere", margin=0.02, xy_only=False)
-    cost = model.fit(ball_cloud(), held_radius=0.03)
+    model = ObstacleSettings(shape="sphere", margin=0.02, xy_only=False)
+    cost = fit_obstacle_shape(model, ball_cloud(), held_radius=0.03)
     assert isinstance(cost, Sphere)
     np.testing.assert_allclose(cost.center.numpy(), CENTER, atol=5e-3)
     assert cost.radius == pytest.approx(RADIUS, abs=1e-6)
@@ -103,11 +102,11 @@ def test_a_shape_registered_from_outside_is_fitted_by_the_obstacle_model(ball):
     assert cost(at(x + 1.0, y, z)).item() == 0.0
     # too few points: None from the shape, EmptyCloudError (naming the shape) from the model, as a lost cloud
     with pytest.raises(EmptyCloudError, match="'sphere' cannot fit"):
-        model.fit(ball_cloud()[:2], held_radius=0.0)
+        fit_obstacle_shape(model, ball_cloud()[:2], held_radius=0.0)
 
 
 def test_the_new_shape_is_described_in_results_and_drawn_in_the_top_view(ball, tmp_path):
-    cost = ObstacleModel(shape="sphere").fit(ball_cloud(), held_radius=0.0)
+    cost = fit_obstacle_shape(ObstacleSettings(shape="sphere"), ball_cloud(), held_radius=0.0)
     data = json.loads(json.dumps(describe_obstacle(cost, "sphere")))  # as results JSON holds it
     assert data["kind"] == "sphere" and data["shape"] == "Sphere"
     assert data["description"] == "ball at (0.40, 0.10, 0.20) m, radius 5.0 cm"
@@ -129,7 +128,7 @@ def test_a_closed_loop_episode_guides_against_the_new_shape_and_reports_it(ball)
     from lano3dp.perception import ObjectObserver, SimOracleSegmenter
     from lano3dp.perception.synthetic import Box, render_boxes, top_down_camera
     from lano3dp.policy import ActionChunk, ChunkedControl, PolicyConfig
-    from lano3dp.runtime import PolicyRunner, RuntimeConfig, rollout
+    from lano3dp.runtime import PolicyRunner, rollout
 
     boxes = [Box("bowl", (-0.25, 0.0), (0.10, 0.10, 0.05), {"kind": "bowl", "role": "target"}),
              Box("obstacle_0", (0.02, 0.0), (0.06, 0.06, 0.30), {"kind": "cylinder", "role": "obstacle"})]
@@ -155,13 +154,13 @@ def test_a_closed_loop_episode_guides_against_the_new_shape_and_reports_it(ball)
 
     policy = StillPolicy()
     # the fitted shape's bare cost (no metric push: this policy has no normaliser; waypoints only)
-    config = RuntimeConfig(guidance=GuidanceConfig(mode="clean", scale=0.04), obstacle=ObstacleModel(shape="sphere"),
-                           metric_gradient=False, densify=1)
+    config = guidance_preset("recommended").with_changes(
+        {"sampler.last_steps": 10, "obstacles.shape": "sphere", "cost.metric_push": False, "cost.densify": 1})
     runner = PolicyRunner(policy, ObjectObserver(SimOracleSegmenter(), n_points=32, min_points=5), config,
                           obstacle_phrases=["obstacle_0"])
     result = rollout(StillEnv(), runner, seed=0, max_steps=2)
     assert result.error is None
-    (fitted,) = runner.obstacles
+    (fitted,) = runner.tracker.obstacles
     assert isinstance(fitted, Sphere)  # segmented, then fitted by the registered shape
     # round the 6 cm obstacle (the centroid of the points in view leans toward the tilted camera)
     assert np.linalg.norm(fitted.center[:2].numpy() - [0.02, 0.0]) < 0.04
@@ -172,35 +171,41 @@ def test_a_closed_loop_episode_guides_against_the_new_shape_and_reports_it(ball)
 
 
 def test_the_configs_and_the_command_line_take_a_registered_shape(ball, tmp_path):
-    config = EvalConfig(checkpoint="run", obstacle=ObstacleSettings(shape="sphere"))
-    assert runtime_config(config, 0).obstacle.shape == "sphere"
-    assert RunConfig("pour the bowl into the pan", obstacle={"shape": "sphere"}).obstacle.shape == "sphere"
-    assert shapes_for_workers("cylinder") == {}
+    config = EvalConfig(task="bowl_pour", guidance=GuidanceChoice("recommended", {"obstacles.shape": "sphere"}))
+    assert config.guidance.resolve(None).obstacles.shape == "sphere"
+    assert shape_for_workers("cylinder") == {}
     runner = CliRunner()
     for command in (["eval", "--task", "bowl_pour"], ["run", "pour the bowl into the pan"]):
-        result = runner.invoke(app, [*command, "--obstacle-shape", "sphere", "--checkpoint", str(tmp_path / "none")])
+        result = runner.invoke(app, [*command, "--set", "guidance.obstacles.shape=sphere", "--checkpoint",
+                                     str(tmp_path / "none")])
         # the shape is accepted: the next check, the missing checkpoint, is what stops the command
         assert result.exit_code == 2 and "--checkpoint" in result.output and "obstacle shape" not in result.output
 
 
-def test_eval_workers_get_the_registered_shape(ball, monkeypatch):
-    import lano3dp.evaluate as evaluate_module
+def test_eval_workers_get_the_registered_shape(ball):
+    import queue
+
+    from lano3dp.evaluation.pool import Job, _worker_main
 
     # spawned eval workers start with the built-in shapes: the parent's registered one travels to them pickled
-    payloads = shapes_for_workers("sphere")
+    payloads = shape_for_workers("sphere")
+    guidance = guidance_preset("recommended").with_changes({"obstacles.shape": "sphere"}).to_dict()
     unregister_obstacle_shape("sphere")
-    monkeypatch.setattr(evaluate_module, "_WORKER_ERROR", None)
-    evaluate_module._worker_init({"checkpoint": "no-such-run", "obstacle_shape": "sphere"}, payloads)
+    todo, done = queue.Queue(), queue.Queue()
+    for job in (Job(0, 7), None):
+        todo.put(job)
+    _worker_main({"checkpoint": "no-such-run"}, guidance, {"shapes": payloads, "observation_types": {}, "filters": {}},
+                 todo, done)
     assert isinstance(get_obstacle_shape("sphere"), BallShape)
-    # the config was accepted: what stopped this worker is the missing checkpoint, not the shape
-    assert isinstance(evaluate_module._WORKER_ERROR, FileNotFoundError)
+    # the settings were accepted: what stopped this worker is the missing checkpoint, not the shape
+    assert done.get_nowait()[2].startswith("FileNotFoundError")
 
     class Local(BallShape):  # defined inside a function: a worker could not import it
         pass
 
     register_obstacle_shape("sphere", Local(), replace=True)
     with pytest.raises(ValueError, match="'sphere' cannot be sent to worker processes"):
-        shapes_for_workers("sphere")
+        shape_for_workers("sphere")
 
 
 def test_a_shape_registered_by_the_env_module_is_accepted_by_the_command_line(tmp_path):
@@ -214,8 +219,8 @@ def test_a_shape_registered_by_the_env_module_is_accepted_by_the_command_line(tm
         "def make(task):\n"
         "    raise RuntimeError('not called')\n")
     try:
-        result = CliRunner().invoke(app, ["eval", "--env", f"{module}:make", "--task", "t", "--obstacle-shape", "cone",
-                                          "--checkpoint", str(tmp_path / "none")])
+        result = CliRunner().invoke(app, ["eval", "--env", f"{module}:make", "--task", "t", "--set",
+                                          "guidance.obstacles.shape=cone", "--checkpoint", str(tmp_path / "none")])
         assert result.exit_code == 2 and "--checkpoint" in result.output and "obstacle shape" not in result.output
     finally:
         if "cone" in obstacle_shape_names():
@@ -225,18 +230,17 @@ def test_a_shape_registered_by_the_env_module_is_accepted_by_the_command_line(tm
 def test_unknown_shapes_fail_in_one_line_naming_the_registered_ones():
     with pytest.raises(UnknownObstacleShapeError, match=r"^unknown obstacle shape 'cone'; registered: cylinder, box, "
                                                         r"points$"):
-        ObstacleModel(shape="cone")
+        ObstacleSettings(shape="cone")
     with pytest.raises(ValueError, match="unknown obstacle shape 'cone'"):
-        EvalConfig(checkpoint="run", obstacle=ObstacleSettings(shape="cone"))
+        EvalConfig(task="bowl_pour", guidance=GuidanceChoice("recommended", {"obstacles.shape": "cone"}))
     for command in (["eval", "--task", "bowl_pour"], ["run", "pour the bowl into the pan"]):
-        result = CliRunner().invoke(app, [*command, "--obstacle-shape", "cone"])
+        result = CliRunner().invoke(app, [*command, "--set", "guidance.obstacles.shape=cone"])
         assert result.exit_code == 2
         lines = [line for line in result.output.splitlines() if line.strip()]
         assert len(lines) == 1 and "unknown obstacle shape 'cone'; registered: cylinder, box, points" in lines[0]
-        assert "--obstacle-shape" in lines[0]
-    for command in ("eval", "run"):
-        help_text = CliRunner().invoke(app, [command, "--help"], env={"COLUMNS": "250"}).output
-        assert "--obstacle-shape" in help_text and "cylinder | box | points" in help_text
+        assert "guidance.obstacles" in lines[0]
+    listing = CliRunner().invoke(app, ["settings"]).output
+    assert "obstacle shapes (guidance.obstacles.shape): cylinder, box, points" in listing
 
 
 def test_registering_is_checked():
@@ -255,17 +259,17 @@ def test_registering_is_checked():
 def test_the_built_in_shapes_fit_as_the_fitting_functions_do():
     cloud = ball_cloud()
     for name, fit in (("cylinder", fit_cylinder), ("box", fit_box)):
-        cost = ObstacleModel(shape=name, margin=0.03).fit(cloud, held_radius=0.04)
+        cost = fit_obstacle_shape(ObstacleSettings(shape=name, margin=0.03), cloud, held_radius=0.04)
         expected = fit(cloud, held_radius=0.04, margin=0.03, xy_only=True)
         assert repr(cost) == repr(expected)
         positions = torch.as_tensor(cloud[None, ::7] * 1.3)
         torch.testing.assert_close(cost.clearance(positions), expected.clearance(positions))
-    points = ObstacleModel(shape="points").fit(cloud, held_radius=0.04)
+    points = fit_obstacle_shape(ObstacleSettings(shape="points"), cloud, held_radius=0.04)
     assert type(points).__name__ == "PointCloudObstacle" and len(points.points) == len(cloud)
     assert get_obstacle_shape("points").plot_data(points) == {}  # too many numbers for results, drawn as before
 
 
-def test_results_saved_before_shapes_were_named_are_described_and_drawn_as_before():
+def test_an_obstacle_is_described_with_its_builtin_shape_and_drawn_by_the_kind_it_names():
     cylinder = fit_cylinder(ball_cloud(), held_radius=0.03)
     data = describe_obstacle(cylinder)  # no shape given: the built-in one of its class
     assert {key: data[key] for key in ("shape", "center", "radius", "safety_distance")} == {
@@ -274,29 +278,14 @@ def test_results_saved_before_shapes_were_named_are_described_and_drawn_as_befor
     assert data["kind"] == "cylinder" and data["description"] == (
         f"vertical cylinder at ({cylinder.center[0]:.3f}, {cylinder.center[1]:.3f}) m, radius "
         f"{100 * cylinder.radius:.1f} cm, Q* {100 * cylinder.safety_distance:.1f} cm")
-    old = {"shape": "Cylinder", "center": [0.4, 0.0], "radius": 0.03, "safety_distance": 0.12}  # no kind
     box = describe_obstacle(fit_box(ball_cloud()), "box")
     unregistered = {"shape": "Sphere", "kind": "not-imported-here", "center": [0, 0], "radius": 0.1}
     fig, ax = plt.subplots()
     try:
-        assert len(draw_obstacle(ax, old, label="obstacle (fitted)")) == 2  # the body and the dashed Q* circle
+        assert len(draw_obstacle(ax, data, label="obstacle (fitted)")) == 2  # the body and the dashed Q* circle
         assert [a.get_label() for a in ax.patches] == ["obstacle (fitted)", "safety distance Q*"]
-        assert len(draw_obstacle(ax, {k: v for k, v in box.items() if k != "kind"})) == 1  # the footprint
+        assert len(draw_obstacle(ax, box)) == 1  # the footprint
         assert draw_obstacle(ax, unregistered) == []  # a plug-in this process lacks is not guessed at
+        assert draw_obstacle(ax, {k: v for k, v in box.items() if k != "kind"}) == []  # `lano3dp migrate` names it
     finally:
         plt.close(fig)
-
-
-def test_an_episode_log_from_before_the_obstacle_shape_field_still_resumes(tmp_path):
-    from lano3dp.evaluate import EpisodeLog, measured_config
-
-    config = measured_config(json.loads(json.dumps(asdict(EvalConfig(checkpoint="run", episodes=2)))))
-    identity = {"config": config, "checkpoint": "run", "weights": "w"}  # as evaluation_identity builds it
-    old_obstacle = {k: v for k, v in config["obstacle"].items() if k != "shape"}
-    old = {**identity, "config": {**config, "obstacle": old_obstacle}}
-    path = tmp_path / "r.episodes.jsonl"
-    path.write_text(json.dumps({"format": "lano3dp-eval-episodes", "evaluation": old}) + "\n"
-                    + json.dumps({"index": 0, "episode": {"seed": 1}}) + "\n")
-    assert EpisodeLog(path, identity).records == {0: {"seed": 1}}
-    other = {**identity, "config": {**config, "obstacle": {**config["obstacle"], "shape": "box"}}}
-    assert EpisodeLog(path, other).records == {}  # made with the cylinder: a box evaluation starts afresh

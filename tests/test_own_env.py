@@ -50,7 +50,7 @@ def test_eval_runs_the_example_env_from_its_file_and_reports_its_own_success(rea
     out = tmp_path / "own.json"
     result = CliRunner().invoke(app, ["eval", "--env", "examples/own_env.py:make_env", "--checkpoint",
                                       str(reach_checkpoint), "--episodes", "2", "--max-steps", "6",
-                                      "--guidance", "clean", "--out", str(out)])
+                                      "--guidance-preset", "recommended", "--out", str(out)])
     assert result.exit_code == 0, (result.output, result.exception)
     data = json.loads(out.read_text())
     assert data["env"] == "examples/own_env.py:make_env" and data["config"]["env"] == data["env"]
@@ -200,8 +200,8 @@ def test_run_acts_an_instruction_in_the_example_env(reach_checkpoint, tmp_path):
         slots=(Slot(word="block", synonyms=("block", "cube")),), checkpoint=reach_checkpoint)]).to_json())
     result = run_instruction(RunConfig("touch the red block and keep clear of the post", registry=str(registry),
                                        env=SPEC, max_steps=4, out=str(tmp_path / "run")))
-    assert result["plan"]["skill"] == "reach_block" and result["obstacles"] == ["post"]
-    guided = result["episodes"]["guided"]
+    assert result["plan"]["skill"] == "reach_block" and result["scenes"][0]["obstacles"] == ["post"]
+    (guided,) = result["episodes"]["guided"]
     assert guided["steps"] <= 4 and guided["success_reported"] is True
     assert [o["shape"] for o in guided["obstacles"]] == ["Cylinder"]
     assert (tmp_path / "run" / "run.json").exists() and (tmp_path / "run" / "top_view.png").exists()

@@ -223,6 +223,22 @@ def test_mujoco_frame_is_metric_calibrated_and_segmented():
         env.close()
 
 
+def test_a_free_camera_frame_is_calibrated_like_a_model_camera():
+    env = TouchBlockEnv(image_size=64)
+    try:
+        env.reset(seed=3)
+        free = mujoco.MjvCamera()  # a view the model has no camera for, as a gymnasium env's viewer uses
+        free.lookat, free.distance, free.azimuth, free.elevation = env.data.body("block").xpos, 0.6, 30.0, -50.0
+        frame = mujoco_frame(env.model, env.data, free, {"block": ["block"]}, 64, 64, env.renderer)
+        centre = env.data.body("block").xpos
+        # the camera sits 0.6 m from the look-at point, and what it sees of the block lies on the 8 cm cube
+        assert np.linalg.norm(frame.camera.cam_to_world[:3, 3] - centre) == pytest.approx(0.6, abs=1e-6)
+        clouds = ObjectObserver(SimOracleSegmenter(), n_points=64).observe(frame, ["block"])
+        assert np.abs(clouds.points[0] - centre).max() < 0.041 + 2e-3
+    finally:
+        env.close()
+
+
 def test_absolute_actions_become_the_deltas_that_reach_them():
     class Recorder:
         def __init__(self):

@@ -287,7 +287,7 @@ def test_save_and_load_give_identical_predictions(tmp_path):
     before = policy.predict_action_chunk(obs, generator=torch.Generator().manual_seed(9))
     policy.save_pretrained(tmp_path / "ckpt")
     assert {p.name for p in (tmp_path / "ckpt").iterdir()} == {"config.json", "model.safetensors",
-                                                               "normalizer.json"}
+                                                               "normalizer.json", "manifest.json"}
     loaded = DiffusionPolicy.from_pretrained(tmp_path / "ckpt")
     assert loaded.config == policy.config
     after = loaded.predict_action_chunk(obs, generator=torch.Generator().manual_seed(9))
@@ -322,12 +322,14 @@ def test_checkpoint_from_a_newer_format_is_refused_and_unversioned_ones_load(tmp
     from safetensors.torch import load_file, save_file
 
     from lano3dp.errors import IncompatibleFormatError
+    from lano3dp.policy.integrity import seal
     from lano3dp.policy.modeling import CHECKPOINT_FORMAT_VERSION
 
     make_policy().save_pretrained(tmp_path / "ckpt")
     weights = tmp_path / "ckpt" / "model.safetensors"
     state = load_file(str(weights))
     save_file(state, str(weights), metadata={"format": "lano3dp-policy"})  # as written before versions existed
+    seal(tmp_path / "ckpt")  # as an old checkpoint is migrated: `lano3dp checkpoint seal` (docs/compat.md)
     DiffusionPolicy.from_pretrained(tmp_path / "ckpt")
     newer = str(CHECKPOINT_FORMAT_VERSION + 1)
     save_file(state, str(weights), metadata={"format": "lano3dp-policy", "format_version": newer})

@@ -12,7 +12,9 @@ from safetensors import safe_open
 from typer.testing import CliRunner
 
 from lano3dp.cli import app
-from lano3dp.evaluate import EpisodeRunner, EvalConfig, PolicyTaskMismatchError, dataset_settings, evaluate
+from lano3dp.evaluation import EvalConfig, PolicyBundle, PolicyTaskMismatchError, evaluate
+from lano3dp.evaluation.episodes import EpisodeRunner
+from lano3dp.guidance.settings import guidance_preset
 from lano3dp.policy import DiffusionPolicy, pretrained
 from lano3dp.policy.pretrained import PackagedCheckpointNotFoundError, export_fp16, packaged_checkpoint
 
@@ -54,15 +56,16 @@ def test_a_copied_checkpoint_without_its_dataset_evaluates_exactly_as_before(mov
 
 def test_a_checkpoint_keeps_its_observation_settings_when_the_dataset_is_gone(moved_checkpoint):
     _, checkpoint, _ = moved_checkpoint
-    settings = dataset_settings(checkpoint)
-    assert settings.task == "bowl_pour" and settings.image_size == 48 and settings.n_points == 32
+    bundle = PolicyBundle.load(checkpoint)
+    settings = bundle.observation
+    assert bundle.task == "bowl_pour" and settings.image_size == 48 and settings.n_points == 32
     assert settings.crop_low == (0.0, -0.5, 0.01) and settings.crop_high == (0.9, 0.5, 0.5)
 
 
 def test_a_checkpoint_refuses_a_task_of_another_skill(moved_checkpoint):
     _, checkpoint, _ = moved_checkpoint
     with pytest.raises(PolicyTaskMismatchError, match="trained for skill 'bowl_pour'.*not 'open_drawer'"):
-        EpisodeRunner(EvalConfig(checkpoint=str(checkpoint), task="open_drawer", episodes=1))
+        EpisodeRunner(EvalConfig(checkpoint=str(checkpoint), task="open_drawer", episodes=1), guidance_preset("none"))
     result = CliRunner().invoke(app, ["eval", "--checkpoint", str(checkpoint), "--task", "open_drawer",
                                       "--episodes", "1", "--out", str(moved_checkpoint[0] / "wrong.json")])
     assert result.exit_code == 1 and "Traceback" not in result.output

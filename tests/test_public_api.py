@@ -17,7 +17,7 @@ import lano3dp
 README = Path(__file__).resolve().parents[1] / "README.md"
 PUBLIC = ("DiffusionPolicy", "PolicyConfig", "TabletopEnv", "SimulatorProtocol", "OfflineDecomposer", "LLMDecomposer",
           "PolicyRunner", "rollout", "evaluate", "EvalConfig", "packaged_checkpoint", "run_instruction", "RunConfig",
-          "GuidanceSettings", "GUIDANCE_PRESETS", "ObstacleSettings", "PerceptionSettings")
+          "GuidanceSettings", "GuidanceChoice", "guidance_preset", "register_guidance_preset", "PerceptionSettings")
 
 
 def readme_python_block(section: str = "## Use it from Python") -> str:
@@ -32,17 +32,8 @@ def test_import_lano3dp_loads_neither_torch_nor_mujoco():
     assert out.strip() == "[]"
 
 
-def test_evaluate_is_callable_as_the_function_however_it_was_imported(monkeypatch):
-    import lano3dp.evaluate as module
-    from lano3dp import evaluate
-
-    calls = []
-    monkeypatch.setattr(module, "evaluate", lambda *args: calls.append(args) or {"summary": {}})
-    assert evaluate("config") == {"summary": {}} and calls == [("config", None, None)]
-
-
 def test_every_public_name_resolves_to_the_object_its_module_defines():
-    from lano3dp.evaluate import evaluate
+    from lano3dp.evaluation import evaluate
     from lano3dp.policy.modeling import DiffusionPolicy
     from lano3dp.sim.protocol import SimulatorProtocol
 
@@ -50,7 +41,7 @@ def test_every_public_name_resolves_to_the_object_its_module_defines():
     for name in PUBLIC:
         assert getattr(lano3dp, name) is not None
     assert lano3dp.DiffusionPolicy is DiffusionPolicy
-    assert lano3dp.evaluate is evaluate or lano3dp.evaluate is sys.modules["lano3dp.evaluate"]
+    assert lano3dp.evaluate is evaluate
     assert lano3dp.SimulatorProtocol is SimulatorProtocol
     with pytest.raises(AttributeError, match="no attribute 'Nonesuch'"):
         lano3dp.Nonesuch  # noqa: B018
@@ -80,16 +71,33 @@ def write_tiny_packaged_policy(root: Path) -> Path:
 @pytest.mark.slow
 def test_the_readme_python_example_runs_on_a_packaged_policy(tmp_path, monkeypatch, capsys):
     from lano3dp.policy import pretrained
+    from lano3dp.sim.tasks.put_item_in_drawer import PutItemInDrawer
 
     write_tiny_packaged_policy(tmp_path)
     monkeypatch.setattr(pretrained, "PACKAGED_ROOT", tmp_path / "checkpoints")
+    # the block sets no step limit (the task's 130 steps); an untrained stand-in never succeeds, so its episodes
+    # are cut to 25 steps here to keep the test quick
+    monkeypatch.setattr(PutItemInDrawer, "max_steps", 25)
     monkeypatch.chdir(tmp_path)
     namespace: dict = {}
     exec(compile(readme_python_block(), str(README), "exec"), namespace)
     printed = capsys.readouterr().out
     assert "put_item_in_drawer ('block', 'drawer') ['mug']" in printed
     run, report = namespace["run"], namespace["report"]
-    assert json.loads((tmp_path / "run_out" / "run.json").read_text())["plan"]["skill"] == "put_item_in_drawer"
-    assert run["episodes"]["guided"]["steps"] <= 40 and isinstance(run["episodes"]["guided"]["success"], bool)
-    assert run["obstacles"]  # the mug is not in the simulator: its obstacle stands in, and guidance has a cost
-    assert report["summary"]["episodes"] == 3 and report["config"]["guidance"]["mode"] == "clean"
+    # the run: the main command's five obstacle scenes, guided as the policy was tuned (this one has no tuning)
+    saved = json.loads((tmp_path / "outputs" / "run" / "python" / "run.json").read_text())
+    assert saved["plan"]["skill"] == "put_item_in_drawer" and saved["guidance"] == report["guidance"]
+    assert [scene["seed"] for scene in run["scenes"]] == [scene["seed"] for scene in saved["scenes"]]
+    guided = run["episodes"]["guided"]
+    assert list(run["episodes"]) == ["guided"] and len(guided) == len(run["scenes"]) == 5
+    assert all(isinstance(episode["success"], bool) and episode["steps"] <= 25 for episode in guided)
+    assert run["summary"]["guided"]["episodes"] == 5
+    assert all(scene["obstacles"] for scene in run["scenes"])  # the mug's stand-in: guidance has a cost everywhere
+    assert f"guided successes: {[episode['success'] for episode in guided]}" in printed
+    # the evaluation: the same policy over five obstacle scenes, batched, with the tree that ran and its provenance
+    assert report["summary"]["episodes"] == 5 and report["config"]["guidance"]["preset"] == "tuned"
+    assert report["config"]["batch"] == 5 and report["config"]["obstacle_scenes_only"]
+    assert report["guidance"]["sampler"]["mode"] == "clean"  # tuned without a guidance.json: recommended
+    assert report["guidance"]["execution"]["filters"] == ["repair", "hold", "escape", "follow"]
+    assert {"commit", "behaviour_version", "versions", "config"} <= set(report["provenance"])
+    assert f"success rate: {report['summary']['success_rate']}" in printed

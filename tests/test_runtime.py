@@ -9,6 +9,7 @@ queue are the real ones (`ChunkedControl`), as the runner drives every policy th
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -17,24 +18,18 @@ import pytest
 import torch
 
 from lano3dp.errors import Lano3dpError
-from lano3dp.geometry.frame import resize_rgb
+from lano3dp.geometry.frame import observe, resize_rgb
 from lano3dp.geometry.rotations import matrix_to_rot6d
-from lano3dp.guidance import AnchoredPath, CheckConfig, Cylinder, Densified, GuidanceConfig, MetricGradient
+from lano3dp.guidance import AnchoredPath, Cylinder, Densified, MetricGradient
+from lano3dp.guidance.execution import Escape, FilterContext, Follow, Hold, Proposal, run_filters
+from lano3dp.guidance.execution.escape import retreat
+from lano3dp.guidance.obstacles import hand_balls
+from lano3dp.guidance.settings import GuidanceSettings, ObstacleSettings, guidance_preset
 from lano3dp.perception import ObjectNotFoundError, ObjectObserver, SimOracleSegmenter
 from lano3dp.perception.synthetic import Box, render_boxes, top_down_camera
 from lano3dp.policy import ActionChunk, ChunkedControl, PolicyConfig
 from lano3dp.policy.normalizer import LinearNormalizer
-from lano3dp.runtime import (
-    FOLLOW_MAX_STEPS,
-    ClosedLoopError,
-    ObstacleModel,
-    PolicyRunner,
-    RuntimeConfig,
-    observe,
-    path_length,
-    rollout,
-    scene_obstacles,
-)
+from lano3dp.runtime import ClosedLoopError, PolicyRunner, path_length, rollout, scene_obstacles
 
 BOWL = Box("bowl", (-0.25, 0.0), (0.10, 0.10, 0.05), {"kind": "bowl", "color": "red", "role": "target"})
 PAN = Box("pan", (0.30, 0.0), (0.14, 0.14, 0.03), {"kind": "pan", "color": "black", "role": "target"})
@@ -42,6 +37,18 @@ OBSTACLE = Box("obstacle_0", (0.02, 0.0), (0.06, 0.06, 0.30), {"kind": "cylinder
                                                                  "role": "obstacle"})
 START = np.array([-0.25, 0.0, 0.25])
 ROT6D = matrix_to_rot6d(np.eye(3)).astype(np.float32)
+# the paper's body: a ball round the EE point, here of a fixed 3 cm
+SPHERE = {"obstacles.body": "sphere", "obstacles.held_radius": 0.03}
+
+
+def settings(preset: str = "none", changes: dict | None = None) -> GuidanceSettings:
+    """A preset with dotted changes, as `--guidance-preset` and `--set guidance.<path>=...` give it."""
+    return guidance_preset(preset).with_changes(changes or {})
+
+
+def guided(rho: float, changes: dict | None = None) -> GuidanceSettings:
+    """The recommended guidance with rho, S = 10 and the sphere body (what these scenes measure), plus changes."""
+    return settings("recommended", {"sampler.rho": rho, "sampler.last_steps": 10, **SPHERE, **(changes or {})})
 
 
 class FakeEnv:
@@ -149,7 +156,7 @@ def test_the_policy_samples_from_its_window_of_the_runners_observations(observer
     """The window is the policy's (`select_action`): the first observation fills it, later ones slide it."""
     env = FakeEnv([BOWL, PAN])
     policy = FakePolicy()
-    runner = PolicyRunner(policy, observer, RuntimeConfig(n_action_steps=1))  # a chunk every step
+    runner = PolicyRunner(policy, observer, n_action_steps=1)  # a chunk every step
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
     runner.act(frame, state)
@@ -173,11 +180,11 @@ def test_the_runner_executes_what_the_policy_queues_and_resets_it_each_episode(o
     runner = PolicyRunner(policy, observer)
     policy.select_action({"object_clouds": np.zeros((1, 2, 64, 3), np.float32),  # left over from elsewhere
                           "state": np.zeros((1, 11), np.float32)})
-    path = rollout(env, runner, seed=0, stop_on_success=False).ee_path
+    path = rollout(env, runner, seed=0, success_at="end").ee_path
     assert len(policy.calls) == 2 and runner.chunks[0].step == 0  # the runner's first step sampled afresh
     np.testing.assert_array_equal(policy.last_chunk.trajectory[0].numpy(), runner.chunks[-1].trajectory)
     np.testing.assert_array_equal(path[1:], policy.last_chunk.actions[0, :5, :3].numpy())  # in order, as queued
-    rollout(env, runner, seed=0, stop_on_success=False)
+    rollout(env, runner, seed=0, success_at="end")
     assert len(policy.calls) == 3  # the next episode's first step sampled again: reset dropped the queue
 
 
@@ -185,24 +192,24 @@ def test_one_chunk_is_executed_for_n_action_steps_before_replanning(observer):
     env = FakeEnv([BOWL, PAN], max_steps=20, success_radius=-1.0)  # never succeeds: runs to the limit
     policy = FakePolicy(n_action_steps=8)
     runner = PolicyRunner(policy, observer)
-    result = rollout(env, runner, seed=3, stop_on_success=False)
+    result = rollout(env, runner, seed=3, success_at="end")
     assert result.steps == 20
     assert len(policy.calls) == 3  # steps 0, 8, 16
     assert [c.step for c in runner.chunks] == [0, 8, 16]
     assert len(result.chunk_latency_s) == 3 and all(t > 0 for t in result.chunk_latency_s)
     assert env.resets == [3]
 
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=4))
-    assert len(rollout(env, runner, seed=3, stop_on_success=False).chunk_latency_s) == 5
+    runner = PolicyRunner(FakePolicy(), observer, n_action_steps=4)
+    assert len(rollout(env, runner, seed=3, success_at="end").chunk_latency_s) == 5
 
 
 def test_more_actions_per_chunk_than_the_policy_was_trained_with_are_taken_from_its_horizon(observer):
-    """RuntimeConfig.n_action_steps may exceed the policy's (up to what the horizon holds): the extra actions
+    """n_action_steps may exceed the policy's (up to what the horizon holds): the extra actions
     are the horizon's next waypoints, not silently dropped (the runner re-planned every policy Ta steps)."""
     env = FakeEnv([BOWL, PAN], max_steps=16, success_radius=-1.0)
     policy = FakePolicy(n_action_steps=4)
-    runner = PolicyRunner(policy, observer, RuntimeConfig(n_action_steps=8))
-    result = rollout(env, runner, seed=0, stop_on_success=False)
+    runner = PolicyRunner(policy, observer, n_action_steps=8)
+    result = rollout(env, runner, seed=0, success_at="end")
     assert [c.step for c in runner.chunks] == [0, 8]
     np.testing.assert_array_equal(result.ee_path[1:9], runner.chunks[0].trajectory[1:9, :3])  # To - 1 = 1 is now
     assert policy.last_chunk.actions.shape == (1, 8, 10)
@@ -225,23 +232,24 @@ def test_obstacle_is_fitted_as_a_cylinder_with_q_star_from_the_held_object(obser
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
     assert scene_obstacles(frame) == ["obstacle_0"]
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(margin=0.02, body="sphere")),
+    runner = PolicyRunner(FakePolicy(), observer, settings("none", {"obstacles.body": "sphere"}),
                           obstacle_phrases=["obstacle_0"], held_object="bowl")
-    runner.update_obstacles(frame, state)
-    (cylinder,) = list(runner.obstacles)
+    tracker = runner.tracker
+    tracker.update(frame, step=0)
+    (cylinder,) = list(tracker.obstacles)
     assert isinstance(cylinder, Cylinder) and cylinder.xy_only
     # a 6 cm square post seen at 64x64 from one side: the covering circle sits within ~1.5 cm of its axis
     # and covers every seen point (radius >= half the side, at most a bit over half the diagonal + offset)
     np.testing.assert_allclose(cylinder.center.numpy(), OBSTACLE.center_xy, atol=0.015)
     assert 0.03 <= cylinder.radius <= 0.06
     # held extent = the bowl's diameter (paper): its covering radius is ~5-7 cm, so ~10-14 cm
-    assert 0.09 <= runner.held_radius <= 0.15
-    assert cylinder.safety_distance == pytest.approx(cylinder.radius + runner.held_radius + 0.02)
+    assert 0.09 <= tracker.held_radius <= 0.15
+    assert cylinder.safety_distance == pytest.approx(cylinder.radius + tracker.held_radius + 0.02)
 
-    fixed = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.05)),
+    fixed = PolicyRunner(FakePolicy(), observer, settings("none", {**SPHERE, "obstacles.held_radius": 0.05}),
                          obstacle_phrases=["obstacle_0"])
-    fixed.update_obstacles(frame, state)
-    assert fixed.held_radius == 0.05
+    fixed.tracker.update(frame, step=0)
+    assert fixed.tracker.held_radius == 0.05
 
 
 def test_a_target_that_is_not_carried_leaves_only_the_gripper_in_q_star(observer):
@@ -249,16 +257,16 @@ def test_a_target_that_is_not_carried_leaves_only_the_gripper_in_q_star(observer
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
-    sphere = ObstacleModel(body="sphere", gripper_radius=0.02)
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=sphere),
-                          obstacle_phrases=["obstacle_0"])
-    runner.update_obstacles(frame, state)
-    assert runner.held_object is None and runner.held_radius == 0.02
+    sphere = settings("none", {"obstacles.body": "sphere", "obstacles.gripper_radius": 0.02})
+    runner = PolicyRunner(FakePolicy(), observer, sphere, obstacle_phrases=["obstacle_0"])
+    tracker = runner.tracker
+    tracker.update(frame, step=0)
+    assert tracker.held_object is None and tracker.held_radius == 0.02
     runner.set_objects(held_object="bowl")
-    runner.update_obstacles(frame, state)
-    assert runner.held_radius > 0.09
+    tracker.update(frame, step=0)
+    assert tracker.held_radius > 0.09
     runner.set_objects(obstacle_phrases=["obstacle_0"])  # what is carried stays unless it is named
-    assert runner.held_object == "bowl"
+    assert tracker.held_object == "bowl"
 
 
 def test_a_phrase_naming_several_obstacles_fits_one_cylinder_each(observer):
@@ -266,9 +274,9 @@ def test_a_phrase_naming_several_obstacles_fits_one_cylinder_each(observer):
             for i, y in enumerate((-0.12, 0.12))]
     env = FakeEnv([BOWL, PAN, *mugs])
     obs, _ = env.reset(seed=0)
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(), obstacle_phrases=["mug"])
-    runner.update_obstacles(*observe(env, obs))
-    centres = sorted(float(c.center[1]) for c in runner.obstacles)
+    runner = PolicyRunner(FakePolicy(), observer, obstacle_phrases=["mug"])
+    runner.tracker.update(observe(env, obs)[0], step=0)
+    centres = sorted(float(c.center[1]) for c in runner.tracker.obstacles)
     assert len(centres) == 2  # "avoid the mugs": never merged into one cloud, never ambiguous
     np.testing.assert_allclose(centres, [-0.12, 0.12], atol=0.015)
 
@@ -277,10 +285,10 @@ def test_the_cost_can_be_densified_and_pushed_isotropically_in_metres(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
-    config = RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.03), metric_gradient=True, densify=4)
+    config = settings("none", {**SPHERE, "cost.metric_push": True, "cost.densify": 4})
     runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
-    runner.update_obstacles(frame, state)
-    cost = runner.obstacle_cost
+    runner.tracker.update(frame, step=0)
+    cost = runner.recipe.guidance_cost(runner.tracker, frame, state)
     # the path is costed from the hand (anchored, the recommended default), densified x4, pushed in metres
     assert isinstance(cost, MetricGradient) and isinstance(cost.cost, AnchoredPath)
     np.testing.assert_allclose(cost.cost.start.numpy(), state[:3])
@@ -289,31 +297,29 @@ def test_the_cost_can_be_densified_and_pushed_isotropically_in_metres(observer):
     np.testing.assert_allclose(cost.weight.numpy(), (2 / np.array([0.4, 0.6, 0.3])) ** 2, rtol=1e-5)
     # two waypoints either side of the obstacle: both clear, but the segment between them is not
     straddle = torch.tensor([[[OBSTACLE.center_xy[0], -0.2, 0.2], [OBSTACLE.center_xy[0], 0.2, 0.2]]])
-    assert runner.obstacles.clearance(straddle).min() > 0
+    assert runner.tracker.obstacles.clearance(straddle).min() > 0
     assert cost.cost.cost.clearance(straddle).min() < 0
     with pytest.raises(ValueError, match="densify"):
-        RuntimeConfig(densify=0)
+        settings("none", {"cost.densify": 0})
 
 
 def test_guidance_reaches_the_policy_only_with_obstacles_and_bends_the_path_clear(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
-    guidance = GuidanceConfig(mode="clean", scale=1.0, last_steps=10)
-    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
-
     plain_policy = FakePolicy()
-    plain = rollout(env, PolicyRunner(plain_policy, observer, RuntimeConfig(obstacle=model),
+    plain = rollout(env, PolicyRunner(plain_policy, observer, settings("none", SPHERE),
                                       obstacle_phrases=["obstacle_0"]), seed=0)
     assert all(call["guidance"] is None and call["cost"] is None for call in plain_policy.calls)
     assert plain.collided and plain.n_collision_steps >= 1 and plain.min_clearance < 0
 
     guided_policy = FakePolicy()
-    config = RuntimeConfig(guidance=guidance, obstacle=model, scheduler="ddim", num_inference_steps=10)
-    guided = rollout(env, PolicyRunner(guided_policy, observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
-    assert all(call["guidance"] is guidance and call["cost"] is not None for call in guided_policy.calls)
+    config = guided(1.0, {"sampler.scheduler": "ddim", "sampler.steps": 10})
+    result = rollout(env, PolicyRunner(guided_policy, observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
+    assert all(call["guidance"].scale == 1.0 and call["guidance"].last_steps == 10 and call["cost"] is not None
+               for call in guided_policy.calls)
     assert guided_policy.calls[0]["scheduler"] == "ddim" and guided_policy.calls[0]["steps"] == 10
-    assert not guided.collided and guided.min_clearance > 0
-    assert guided.path_length > plain.path_length  # the detour
-    assert all(c is not None and c >= 0 for c in guided.chunk_predicted_clearance)
+    assert not result.collided and result.min_clearance > 0
+    assert result.path_length > plain.path_length  # the detour
+    assert all(c is not None and c >= 0 for c in result.chunk_predicted_clearance)
 
     # guidance without obstacles is a no-op: nothing to push against
     free_policy = FakePolicy()
@@ -323,12 +329,10 @@ def test_guidance_reaches_the_policy_only_with_obstacles_and_bends_the_path_clea
 
 def test_the_guidance_cost_turns_each_obstacles_push_as_configured(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
-    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
-    guidance = GuidanceConfig(mode="clean", scale=0.04, last_steps=10)
     costs = {}
     for turn in (0.0, 60.0):
         policy = FakePolicy()
-        config = RuntimeConfig(guidance=guidance, obstacle=model, push_turn=turn)
+        config = guided(0.04, {"cost.push_turn": turn})
         rollout(env, PolicyRunner(policy, observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
         costs[turn] = repr(policy.calls[0]["cost"])
     assert "TurnedPush" not in costs[0.0]
@@ -337,18 +341,17 @@ def test_the_guidance_cost_turns_each_obstacles_push_as_configured(observer):
 
 def test_a_chunk_guidance_left_inside_the_margin_is_pushed_clear_after_sampling(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
-    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
     # a push far too weak to bend the straight line round the obstacle
-    weak = GuidanceConfig(mode="clean", scale=1e-6, last_steps=10)
     results = {}
-    for repair_steps in (0, 20):
-        config = RuntimeConfig(guidance=weak, obstacle=model, repair_steps=repair_steps, hold_unclear=False)
+    for filters in ([], ["repair"]):
+        config = guided(1e-6, {"execution.filters": filters})
         runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
-        results[repair_steps] = (rollout(env, runner, seed=0), runner.chunks)
-    unrepaired, chunks = results[0]
-    assert unrepaired.collided and all(c.repaired == 0 for c in chunks)
-    repaired, chunks = results[20]
-    assert any(c.repaired > 0 for c in chunks) and all(c.repaired <= 20 for c in chunks)
+        results[bool(filters)] = (rollout(env, runner, seed=0), runner.chunks)
+    unrepaired, chunks = results[False]
+    assert unrepaired.collided and all(not c.notes for c in chunks)
+    repaired, chunks = results[True]
+    steps = [c.notes.get("repair", {}).get("steps", 0) for c in chunks]
+    assert any(s > 0 for s in steps) and all(s <= 20 for s in steps)
     # the simulator's own contact test: the pushed path clears, and each chunk was predicted to
     assert not repaired.collided and repaired.min_clearance > 0
     assert min(repaired.chunk_predicted_clearance) >= 0
@@ -356,43 +359,39 @@ def test_a_chunk_guidance_left_inside_the_margin_is_pushed_clear_after_sampling(
 
 def test_a_chunk_predicted_to_collide_runs_only_its_clear_start_and_the_hand_holds_short(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
-    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
-    weak = GuidanceConfig(mode="clean", scale=1e-6, last_steps=10)  # leaves the straight line through it
-    config = RuntimeConfig(guidance=weak, obstacle=model, repair_steps=0, hold_unclear=True,
-                           follow_when_stuck=False)
+    # a push too weak to leave the straight line through it
+    config = guided(1e-6, {"execution.filters": ["hold", "escape"]})
     runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
     result = rollout(env, runner, seed=0)
     assert not result.collided and result.min_clearance > 0
     cut = [c.executed for c in runner.chunks if c.executed is not None]
     assert cut and 0 in cut  # cut short, then held still where every way on comes too close
     assert not result.success  # the pan is beyond the obstacle: a hand that stops short never gets there
-    unguided = RuntimeConfig(obstacle=model, repair_steps=0, hold_unclear=True)
-    plain = PolicyRunner(FakePolicy(), observer, unguided, obstacle_phrases=["obstacle_0"])
-    assert rollout(env, plain, seed=0).collided  # only guided chunks are checked: unguided runs stay the baseline
+    plain = PolicyRunner(FakePolicy(), observer, settings("none", SPHERE), obstacle_phrases=["obstacle_0"])
+    assert rollout(env, plain, seed=0).collided  # unguided runs stay the baseline
     assert all(c.executed is None for c in plain.chunks)
+    with pytest.raises(ValueError, match="act on guided chunks"):  # a filter cannot act without guidance
+        settings("none", {"execution.filters": ["hold"]})
 
 
 def test_a_hand_held_at_an_obstacle_follows_its_boundary_round_it_and_then_the_policy_again(observer):
-    """The scene above, where the held hand never reached the pan: after FOLLOW_AFTER_HOLDS holds it steps
-    round the obstacle's side, keeping clear, until the policy's straight line to the pan runs."""
+    """The scene above, where the held hand never reached the pan: after `after_holds` holds it steps round the
+    obstacle's side, keeping clear, until the policy's straight line to the pan runs."""
     env = FakeEnv([BOWL, PAN, OBSTACLE], max_steps=60)
-    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
-    weak = GuidanceConfig(mode="clean", scale=1e-6, last_steps=10)
-    config = RuntimeConfig(guidance=weak, obstacle=model, repair_steps=0, hold_unclear=True)
-    assert config.follow_when_stuck  # the default
+    config = guided(1e-6, {"execution.filters": ["hold", "escape", "follow"]})
     runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
     result = rollout(env, runner, seed=0)
     assert result.success and not result.collided and result.min_clearance > 0
-    assert 1 <= runner.followed_steps <= FOLLOW_MAX_STEPS
+    assert 1 <= result.filters["follow"]["steps"] <= Follow.Options().max_steps
     # it went round the side, not through: the path left the start-to-pan line by more than the obstacle's width
-    assert np.abs(result.ee_path[:, 1]).max() > OBSTACLE.size[1] / 2 + model.held_radius
+    assert np.abs(result.ee_path[:, 1]).max() > OBSTACLE.size[1] / 2 + SPHERE["obstacles.held_radius"]
 
 
 def test_checked_execution_resamples_with_guidance_until_the_chunk_is_clear(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     policy = FakePolicy()
-    config = RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.03),
-                           checked=CheckConfig(initial_scale=1.0))
+    # checked execution starting unguided: it escalates from rho (here 1) whenever the executed part collides
+    config = settings("none", {**SPHERE, "sampler.strategy": "checked", "sampler.rho": 1.0})
     result = rollout(env, PolicyRunner(policy, observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
     assert not result.collided
     assert max(result.chunk_tries) >= 2  # the straight line hit the obstacle at least once
@@ -402,9 +401,11 @@ def test_checked_execution_resamples_with_guidance_until_the_chunk_is_clear(obse
 
 def test_checked_execution_can_stop_an_episode_that_cannot_be_cleared(observer):
     env = FakeEnv([BOWL, PAN, OBSTACLE])
-    config = RuntimeConfig(obstacle=ObstacleModel(body="sphere", held_radius=0.03), on_unclear="stop",
-                           checked=CheckConfig(initial_scale=1e-6, max_tries=2, growth=1.0))
-    result = rollout(env, PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"]), seed=0)
+    config = settings("none", {**SPHERE, "sampler.strategy": "checked", "sampler.rho": 1e-6,
+                               "sampler.on_unclear": "stop"})
+    runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
+    runner.sampler.check = dataclasses.replace(runner.sampler.check, initial_scale=1e-6, max_tries=2, growth=1.0)
+    result = rollout(env, runner, seed=0)
     assert not result.success
     assert result.error.startswith("ClosedLoopError: no collision-free chunk")
 
@@ -422,9 +423,9 @@ def test_runner_checks_its_inputs(observer):
     with pytest.raises(ValueError, match="needs an observer"):
         PolicyRunner(FakePolicy(), None)
     with pytest.raises(ValueError, match="exceeds what one chunk holds"):
-        PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=16))
+        PolicyRunner(FakePolicy(), observer, n_action_steps=16)
     with pytest.raises(ValueError, match="obstacle shape"):
-        ObstacleModel(shape="cone")
+        ObstacleSettings(shape="cone")
     assert issubclass(ClosedLoopError, Lano3dpError)  # rollout turns it into a failed episode, not a crash
 
 
@@ -450,7 +451,7 @@ def test_a_target_hidden_after_the_first_frame_keeps_its_previous_cloud(observer
     hidden_pan = render_boxes(frame.camera, [BOWL])  # the pan is gone from view (occluded)
     second = runner.policy_input(hidden_pan, state)["object_clouds"][0]
     np.testing.assert_array_equal(second[1], first[1])
-    assert runner.held_clouds == 1
+    assert runner.targets.held_clouds == 1
 
     fresh = PolicyRunner(FakePolicy(), observer)
     with pytest.raises(ObjectNotFoundError, match="'pan'"):  # never seen: nothing to hold
@@ -460,7 +461,6 @@ def test_a_target_hidden_after_the_first_frame_keeps_its_previous_cloud(observer
 def test_the_collector_and_the_runtime_share_one_resize_and_one_observe():
     from lano3dp import collect
     from lano3dp.policy.observations import image
-    from lano3dp.runtime import observe
 
     # the image type's one module both records the images and makes them at run time
     assert image.resize_rgb is resize_rgb and collect.observe is observe
@@ -495,30 +495,29 @@ def test_the_swept_body_is_the_hand_plus_the_held_object_while_it_is_grasped(obs
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     obs, _ = env.reset(seed=0)
     frame, _ = observe(env, obs)
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(), obstacle_phrases=["obstacle_0"],
-                          held_object="bowl")
-    model = runner.config.obstacle
+    runner = PolicyRunner(FakePolicy(), observer, obstacle_phrases=["obstacle_0"], held_object="bowl")
+    tracker, model = runner.tracker, runner.guidance.obstacles
     assert model.body == "swept"
     # the EE 3 cm above the bowl's rim, fingers along world y, gripper open: the hand alone
     at_rim = np.array([BOWL.center_xy[0] + 0.05, BOWL.center_xy[1], 0.08])
     free = np.concatenate([at_rim, ROT6D, [0.08, 0.0]]).astype(np.float32)
-    runner.update_obstacles(frame, free)
-    offsets, radii = runner.swept_body(frame, free)
+    tracker.update(frame, step=0)
+    offsets, radii = tracker.body(frame, free)
     assert np.allclose(offsets[:, [0, 2]], 0) and np.abs(offsets[:, 1]).max() == pytest.approx(0.04)
-    assert runner.held_radius == pytest.approx(model.hand_half_span)
+    assert tracker.held_radius == pytest.approx(model.hand_half_span)
     # grasped: one more ball, at the bowl's centre (5 cm behind the EE in x) with the bowl's radius
     held = free.copy()
     held[10] = 1.0
-    offsets, radii = runner.swept_body(frame, held)
-    assert len(radii) == len(model.hand_balls(ROT6D)[1]) + 1
+    offsets, radii = tracker.body(frame, held)
+    assert len(radii) == len(hand_balls(model, ROT6D)[1]) + 1
     np.testing.assert_allclose(offsets[-1, :2], [-0.05, 0.0], atol=0.015)
     assert 0.04 <= radii[-1] <= 0.075
     # a stale flag far from the bowl does not drag a ball across the table
     far = held.copy()
     far[:3] = [0.3, 0.2, 0.3]
-    assert len(runner.swept_body(frame, far)[1]) == len(model.hand_balls(ROT6D)[1])
+    assert len(tracker.body(frame, far)[1]) == len(hand_balls(model, ROT6D)[1])
     with pytest.raises(ValueError, match="sphere"):
-        ObstacleModel(held_radius=0.05)
+        ObstacleSettings(held_radius=0.05)
 
 
 def test_a_target_the_obstacle_mostly_covers_in_the_first_frame_keeps_the_cloud_of_what_shows(observer):
@@ -529,8 +528,8 @@ def test_a_target_the_obstacle_mostly_covers_in_the_first_frame_keeps_the_cloud_
     env = FakeEnv([BOWL, PAN, post], max_steps=6, success_radius=-1.0)
     visible = np.isin(env.frame_.segmentation, env.frame_.instance_names["bowl"]).sum()
     assert 3 <= visible < observer.min_points
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=2))
-    result = rollout(env, runner, seed=0, stop_on_success=False)
+    runner = PolicyRunner(FakePolicy(), observer, n_action_steps=2)
+    result = rollout(env, runner, seed=0, success_at="end")
     assert result.error is None and result.steps == 6
     assert result.partly_hidden == ["bowl"]
     assert result.held_clouds >= 2  # the re-plans kept the first cloud
@@ -569,9 +568,8 @@ def test_a_target_hidden_from_the_camera_in_the_first_frame_is_taken_from_anothe
         assert not np.isin(env.frame_.segmentation, env.frame_.instance_names[hidden]).any()
         seen = np.isin(env.other_frame.segmentation, env.other_frame.instance_names[hidden]).sum()
         assert seen >= observer.min_points
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(n_action_steps=2),
-                          obstacle_phrases=["obstacle_0", "obstacle_1"])
-    result = rollout(env, runner, seed=0, stop_on_success=False)
+    runner = PolicyRunner(FakePolicy(), observer, n_action_steps=2, obstacle_phrases=["obstacle_0", "obstacle_1"])
+    result = rollout(env, runner, seed=0, success_at="end")
     assert result.error is None and result.steps == 6
     assert result.seen_from_other_views == ["bowl", "obstacle_1"] and result.held_clouds == 0
     assert len(result.obstacles) == 2 and abs(result.obstacles[1]["center"][1] + 0.06) < 0.02
@@ -580,9 +578,9 @@ def test_a_target_hidden_from_the_camera_in_the_first_frame_is_taken_from_anothe
     # the other camera's cloud is the bowl's own, not the wall's
     assert np.linalg.norm(np.array(result.targets["bowl"][:2]) - BOWL.center_xy) < 0.06
     # the paper's body measures the held bowl's extent before the grasp: from the other camera too
-    sphere = RuntimeConfig(n_action_steps=2, obstacle=ObstacleModel(body="sphere"))
-    result = rollout(env, PolicyRunner(FakePolicy(), observer, sphere, obstacle_phrases=["obstacle_0"],
-                                       held_object="bowl"), seed=0, stop_on_success=False)
+    sphere = settings("none", {"obstacles.body": "sphere"})
+    result = rollout(env, PolicyRunner(FakePolicy(), observer, sphere, n_action_steps=2,
+                                       obstacle_phrases=["obstacle_0"], held_object="bowl"), seed=0, success_at="end")
     assert result.error is None and 0.08 < result.held_radius < 0.16  # twice the bowl's fitted radius
 
     env_without = FakeEnv([BOWL, PAN, wall], max_steps=6)  # one camera: nowhere else to look
@@ -591,9 +589,7 @@ def test_a_target_hidden_from_the_camera_in_the_first_frame_is_taken_from_anothe
 
 
 def test_guide_when_needed_keeps_the_policys_own_chunk_while_it_clears_the_obstacle(observer):
-    guidance = GuidanceConfig(mode="clean", scale=1.0, last_steps=10)
-    config = RuntimeConfig(guidance=guidance, obstacle=ObstacleModel(body="sphere", held_radius=0.03),
-                           guide_when_needed=True)
+    config = guided(1.0, {"sampler.strategy": "when_needed"})
     side_post = Box("obstacle_0", (0.02, 0.25), (0.06, 0.06, 0.30), OBSTACLE.attributes)  # far off the line
     policy = FakePolicy()
     clear = rollout(FakeEnv([BOWL, PAN, side_post]), PolicyRunner(policy, observer, config,
@@ -605,7 +601,7 @@ def test_guide_when_needed_keeps_the_policys_own_chunk_while_it_clears_the_obsta
     blocked = rollout(FakeEnv([BOWL, PAN, OBSTACLE]), PolicyRunner(policy, observer, config,
                                                                    obstacle_phrases=["obstacle_0"]), seed=0)
     assert not blocked.collided and blocked.min_clearance > 0  # guided where the own chunk would hit
-    assert any(call["guidance"] is guidance for call in policy.calls) and 2 in blocked.chunk_tries
+    assert any(call["guidance"] is not None for call in policy.calls) and 2 in blocked.chunk_tries
 
 
 def test_a_hand_already_inside_the_margin_may_move_away_but_not_closer_when_escape_is_on(observer):
@@ -614,22 +610,23 @@ def test_a_hand_already_inside_the_margin_may_move_away_but_not_closer_when_esca
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
     state = state.copy()
+    runner = PolicyRunner(FakePolicy(), observer, settings("none", SPHERE), obstacle_phrases=["obstacle_0"])
+    runner.tracker.update(frame, step=0)
+    (cylinder,) = runner.tracker.obstacles
+    axis = cylinder.center.numpy()
+    margin = runner.guidance.obstacles.margin
+    state[:3] = [axis[0] - cylinder.safety_distance + 0.019, axis[1], 0.25]  # 1 mm from the held sphere
     kept = {}
-    for escape in (False, True):
-        model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
-        config = RuntimeConfig(obstacle=model, escape_when_inside=escape)
-        runner = PolicyRunner(FakePolicy(), observer, config, obstacle_phrases=["obstacle_0"])
-        runner.update_obstacles(frame, state)
-        (cylinder,) = runner.obstacles
-        axis = cylinder.center.numpy()
-        state[:3] = [axis[0] - cylinder.safety_distance + 0.019, axis[1], 0.25]  # 1 mm from the held sphere
+    for filters in ([Hold()], [Hold(), Escape()]):
         for name, step in (("away", -0.01), ("closer", 0.01)):
             waypoints = np.array([[state[0] + step * i, state[1], 0.25] for i in range(1, 5)])
             actions = torch.cat([torch.as_tensor(waypoints, dtype=torch.float32),
                                  torch.as_tensor(ROT6D).expand(4, 6), torch.ones(4, 1)], -1)[None]
-            cost = runner.executed_path_cost(state, actions[0])
-            assert cost.present_clearance() < model.margin / 2
-            kept[escape, name] = runner.cut_to_clear(actions, state, cost).shape[1]
+            path = runner.recipe.executed_path(runner.tracker, state, actions[0])
+            assert path.present_clearance() < margin / 2
+            context = FilterContext(state, start=0, n_action_steps=4, path=path, margin=margin)
+            proposal, notes = run_filters(filters, Proposal(actions, actions), context)
+            kept[len(filters) == 2, name] = 4 if proposal.executed is None else proposal.executed
     assert kept[False, "away"] == kept[False, "closer"] == 0  # held still either way
     assert kept[True, "away"] == 4 and kept[True, "closer"] == 0
 
@@ -638,19 +635,19 @@ def test_a_hand_inside_an_obstacle_with_no_way_forward_steps_straight_out(observ
     env = FakeEnv([BOWL, PAN, OBSTACLE])
     obs, _ = env.reset(seed=0)
     frame, state = observe(env, obs)
-    model = ObstacleModel(body="sphere", held_radius=0.03, margin=0.02)
-    runner = PolicyRunner(FakePolicy(), observer, RuntimeConfig(obstacle=model), obstacle_phrases=["obstacle_0"])
-    runner.update_obstacles(frame, state)
-    (cylinder,) = runner.obstacles
+    runner = PolicyRunner(FakePolicy(), observer, settings("none", SPHERE), obstacle_phrases=["obstacle_0"])
+    runner.tracker.update(frame, step=0)
+    (cylinder,) = runner.tracker.obstacles
     axis = cylinder.center.numpy()
+    margin = runner.guidance.obstacles.margin
 
     def retreat_from(x: float, step: float) -> tuple[np.ndarray, np.ndarray, float]:
         here = state.copy()
         here[:3] = [x, axis[1], 0.25]
         waypoints = np.array([[x + step * i, axis[1], 0.25] for i in range(1, 5)])
         actions = np.hstack([waypoints, np.tile(ROT6D, (4, 1)), np.ones((4, 1))])
-        cost = runner.executed_path_cost(here, torch.as_tensor(actions, dtype=torch.float32))
-        return here[:3], runner.retreat(here, cost).numpy(), cost.present_clearance()
+        cost = runner.recipe.executed_path(runner.tracker, here, torch.as_tensor(actions, dtype=torch.float32))
+        return here[:3], retreat(here, cost, margin / 2).numpy(), cost.present_clearance()
 
     # 2 cm into the held sphere's reach, every step of the chunk deeper: straight back, away from the axis
     here, out, gap = retreat_from(axis[0] - cylinder.safety_distance + 0.04, step=0.01)

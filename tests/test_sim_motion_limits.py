@@ -10,6 +10,7 @@ from lano3dp.sim import TabletopEnv
 from lano3dp.sim.env import MotionLimits
 from lano3dp.sim.experts import rotation_angle
 from lano3dp.sim.tasks import TASKS
+from simulator_versions import skip_if_mujoco_too_old
 
 LIMITS = MotionLimits()
 STEP_DISTANCE = LIMITS.linear / 10.0  # metres per 10 Hz control step
@@ -65,6 +66,7 @@ def test_a_target_within_the_limits_is_reached_in_one_step():
 
 @pytest.mark.parametrize("task", sorted(TASKS))
 def test_every_expert_succeeds_without_meeting_the_limits(task):
+    skip_if_mujoco_too_old(task)
     env = TabletopEnv(task, image_size=16, render_rgb=False)
     try:
         for seed in (0, 1):

@@ -5,6 +5,7 @@ import pytest
 
 from lano3dp.sim import TabletopEnv, make_task
 from lano3dp.sim.variations import Variation
+from simulator_versions import skip_if_mujoco_too_old
 
 
 def run_expert(env, seed):
@@ -20,6 +21,7 @@ def run_expert(env, seed):
 
 @pytest.mark.parametrize("task,seeds", [("bowl_pour", [10, 11, 12]), ("bottle_upright", [10, 11, 12])])
 def test_expert_succeeds_on_fresh_seeds(task, seeds):
+    skip_if_mujoco_too_old(task)
     env = TabletopEnv(task, image_size=32, render_rgb=False)
     try:
         results = [run_expert(env, seed) for seed in seeds]

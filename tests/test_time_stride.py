@@ -17,10 +17,10 @@ from typer.testing import CliRunner
 from lano3dp.cli import app
 from lano3dp.data import EpisodeStore, SequenceDataset
 from lano3dp.data.sequence import window_indices
-from lano3dp.evaluate import dataset_settings
 from lano3dp.geometry.camera import PinholeCamera
 from lano3dp.geometry.frame import RGBDFrame
 from lano3dp.geometry.rotations import matrix_to_rot6d, rot6d_to_matrix
+from lano3dp.migrate import migrate
 from lano3dp.policy import ChunkedControl, DiffusionPolicy, PolicyConfig
 from lano3dp.runtime import PolicyRunner, interpolate_action, rollout
 from lano3dp.sim.protocol import SimulatorProtocol
@@ -120,11 +120,10 @@ def test_a_checkpoint_trained_with_a_stride_carries_it_and_acts_without_its_data
     shutil.rmtree(data)  # the checkpoint is self-contained: nothing below reads the store
     policy = DiffusionPolicy.from_pretrained(final)
     assert policy.config.time_stride == 2
-    assert dataset_settings(final).data == str(data)  # named, not needed
     env, recorder = CountingEnv(max_steps=20), RecordingPolicy(policy)
     assert isinstance(env, SimulatorProtocol)
     runner = PolicyRunner(recorder, visual_fn=lambda frame: np.zeros((1, 16, 3), np.float32))
-    result = rollout(env, runner, seed=0, stop_on_success=False)
+    result = rollout(env, runner, seed=0, success_at="end")
 
     assert result.steps == 20 and len(env.actions) == 20
     # Ta = 4 policy actions of 2 env steps each per chunk: a chunk every 8 env steps
@@ -149,7 +148,7 @@ def test_a_stride_1_checkpoint_carries_no_stride_and_steps_once_per_action(tmp_p
     policy = DiffusionPolicy.from_pretrained(final)
     env, recorder = CountingEnv(max_steps=9), RecordingPolicy(policy)
     rollout(env, PolicyRunner(recorder, visual_fn=lambda frame: np.zeros((1, 16, 3), np.float32)), seed=0,
-            stop_on_success=False)
+            success_at="end")
     np.testing.assert_array_equal(np.stack(env.actions), np.concatenate([c["actions"] for c in recorder.calls])[:9])
 
 
@@ -170,13 +169,15 @@ def test_a_resumed_run_with_another_stride_is_refused(tmp_path):
     train(micro_config(data, strided, steps=1, ckpt_every=1, val_ratio=0.0, batch_size=4, time_stride=2))
     with pytest.raises(TrainingConfigError, match=r"time_stride: 2 -> 1"):
         Trainer(micro_config(data, strided, steps=2, val_ratio=0.0, batch_size=4))
-    # the same stride resumes; so does a run whose train_config.json predates the field (trained with stride 1)
+    # the same stride resumes; so does a run whose train_config.json predates the field (trained with stride 1),
+    # once `lano3dp migrate` has stated it
     Trainer(micro_config(data, strided, steps=2, val_ratio=0.0, batch_size=4, time_stride=2)).close()
     run = tmp_path / "run"
     for path in {run / "train_config.json", *(p.resolve() for p in run.glob("checkpoints/*/train_config.json"))}:
         saved = json.loads(path.read_text())
         del saved["time_stride"]
         path.write_text(json.dumps(saved))
+    assert migrate([run])
     Trainer(micro_config(data, tmp_path / "run", steps=2, val_ratio=0.0, batch_size=4)).close()
 
 

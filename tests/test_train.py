@@ -166,6 +166,20 @@ def test_augmented_training_trains_and_records_the_augmentation(reach_data, tmp_
     assert saved["augment"]["shift"] == AugmentConfig().shift
 
 
+def test_a_lifted_training_widens_the_normalisers_heights_by_the_lift(reach_data, tmp_path):
+    from lano3dp.augment import AugmentConfig
+    from lano3dp.policy import DiffusionPolicy
+
+    plain = DiffusionPolicy.from_pretrained(train(micro_config(reach_data, tmp_path / "plain", steps=1,
+                                                               val_ratio=0.0))).normalizer_stats()
+    lifted = DiffusionPolicy.from_pretrained(train(micro_config(
+        reach_data, tmp_path / "lifted", augment=AugmentConfig(lift=0.03), steps=1, val_ratio=0.0))).normalizer_stats()
+    for key in ("action", "state", "object_clouds"):
+        np.testing.assert_allclose(lifted[key]["min"][2], plain[key]["min"][2] - 0.03, atol=1e-6)
+        np.testing.assert_allclose(lifted[key]["max"][2], plain[key]["max"][2] + 0.03, atol=1e-6)
+        np.testing.assert_array_equal(np.delete(lifted[key]["min"], 2), np.delete(plain[key]["min"], 2))
+
+
 def test_resuming_with_another_policy_configuration_is_refused(reach_data, tmp_path):
     train(micro_config(reach_data, tmp_path / "run", steps=1, val_ratio=0.0))
     other = micro_config(reach_data, tmp_path / "run", steps=2)

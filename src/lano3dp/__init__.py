@@ -8,7 +8,8 @@ The public API, importable from here (see the README's "Use it from Python"):
 - planner: OfflineDecomposer, LLMDecomposer (instruction -> TaskPlan);
 - runner: PolicyRunner (perception + guided policy, one action per frame), rollout (one episode);
 - evaluation: evaluate + EvalConfig (as `lano3dp eval`), run_instruction + RunConfig (as `lano3dp run`), and the
-  settings they nest: GuidanceSettings (GUIDANCE_PRESETS), ObstacleSettings, PerceptionSettings.
+  settings they nest: GuidanceChoice (a preset by name + overrides), PerceptionSettings;
+- guidance settings: GuidanceSettings (the tree), guidance_preset / register_guidance_preset (named presets).
 
 Names are imported on first use (module __getattr__), so `import lano3dp` stays light: no torch, no MuJoCo.
 """
@@ -31,24 +32,33 @@ _EXPORTS = {
     "LLMDecomposer": "lano3dp.language.llm",
     "PolicyRunner": "lano3dp.runtime",
     "rollout": "lano3dp.runtime",
-    "evaluate": "lano3dp.evaluate",
-    "EvalConfig": "lano3dp.evaluate",
-    "run_instruction": "lano3dp.evaluate",
-    "RunConfig": "lano3dp.evaluate",
-    "PerceptionSettings": "lano3dp.evaluate",
+    "evaluate": "lano3dp.evaluation",
+    "EvalConfig": "lano3dp.evaluation",
+    "run_instruction": "lano3dp.evaluation",
+    "RunConfig": "lano3dp.evaluation",
+    "PerceptionSettings": "lano3dp.evaluation",
+    "GuidanceChoice": "lano3dp.evaluation",
     "GuidanceSettings": "lano3dp.guidance.settings",
-    "GUIDANCE_PRESETS": "lano3dp.guidance.settings",
-    "ObstacleSettings": "lano3dp.guidance.settings",
+    "guidance_preset": "lano3dp.guidance.settings",
+    "register_guidance_preset": "lano3dp.guidance.settings",
 }
 
-__all__ = ["GUIDANCE_PRESETS", "DiffusionPolicy", "EvalConfig", "GuidanceSettings", "LLMDecomposer", "ObstacleSettings",
+# literal, so linters see it; test_public_api checks it against _EXPORTS
+__all__ = ["DiffusionPolicy", "EvalConfig", "GuidanceChoice", "GuidanceSettings", "LLMDecomposer",
            "OfflineDecomposer", "PerceptionSettings", "PolicyConfig", "PolicyRunner", "RunConfig", "SimulatorProtocol",
-           "TabletopEnv", "__version__", "evaluate", "packaged_checkpoint", "rollout",
-           "run_instruction"]  # literal, so linters see it; test_public_api checks it against _EXPORTS
+           "TabletopEnv", "__version__", "evaluate", "guidance_preset", "packaged_checkpoint",
+           "register_guidance_preset", "rollout", "run_instruction"]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports on demand
-    from lano3dp.evaluate import EvalConfig, PerceptionSettings, RunConfig, evaluate, run_instruction
-    from lano3dp.guidance.settings import GUIDANCE_PRESETS, GuidanceSettings, ObstacleSettings
+    from lano3dp.evaluation import (
+        EvalConfig,
+        GuidanceChoice,
+        PerceptionSettings,
+        RunConfig,
+        evaluate,
+        run_instruction,
+    )
+    from lano3dp.guidance.settings import GuidanceSettings, guidance_preset, register_guidance_preset
     from lano3dp.language.llm import LLMDecomposer
     from lano3dp.language.offline import OfflineDecomposer
     from lano3dp.policy.config import PolicyConfig
@@ -70,12 +80,7 @@ def __getattr__(name: str) -> Any:
         raise AttributeError(f"module 'lano3dp' has no attribute {name!r}")
     if name in _NEED_TASK_SKILLS:
         importlib.import_module("lano3dp.sim.tasks")
-    imported = importlib.import_module(module)
-    if module == f"{__name__}.{name}":
-        # `evaluate` is both a function and its module's name: importing the module makes the package
-        # attribute the module (Python's rule), so the module itself is callable (see evaluate.py's end).
-        return imported
-    value = getattr(imported, name)
+    value = getattr(importlib.import_module(module), name)
     globals()[name] = value  # later look-ups skip __getattr__
     return value
 

@@ -16,6 +16,8 @@ or obs rgb/depth/intrinsics/cam_to_world), and success from `info["success"]`. R
                                     `SimOracleSegmenter` (phrases: info["target_phrases"][slot], else the slot)
     scene_cloud     (512, 3)        cropped scene above the table height (DP3 baseline)
     rgb             (96, 96, 3)     uint8 (Diffusion Policy baseline)
+    goal            (D,) float32    obs["goal"] when the env hands a goal over (a task input,
+                                    `policy.observations.vector`); likewise any registered task input
     ...                             the key of any other observation type registered before collecting
 
 Each observation key is recorded by its observation type's module (`lano3dp.policy.observations`).
@@ -72,6 +74,10 @@ class CollectionError(Lano3dpError, RuntimeError):
     """The expert could not produce an episode (every seed tried failed)."""
 
 
+class ExpertError(CollectionError):
+    """An expert raised, or returned something that is not an action (10,) of finite numbers."""
+
+
 @dataclass
 class CollectConfig:
     """What `collect` records. Sizes in pixels/points; crop box in metres, world frame."""
@@ -123,9 +129,10 @@ class CollectResult:
     path: Path
     added: int
     total: int
-    failed_seeds: list[int] = field(default_factory=list)
+    failed_seeds: list[int] = field(default_factory=list)  # the expert did not succeed
     seconds: float = 0.0
     steps: int = 0
+    unseen_seeds: list[int] = field(default_factory=list)  # an object out of view in the first frame
 
 
 def collect(task: str, episodes: int, out: str | Path, variation: str = "clean", seed: int = 0,
@@ -240,6 +247,7 @@ def _collect_episodes(config: CollectConfig) -> CollectResult:
     from tqdm.auto import tqdm
 
     from lano3dp.perception import ObjectObserver, SimOracleSegmenter
+    from lano3dp.policy.observations import UnrecordableEpisode
 
     started = time.perf_counter()
     env, label, owned = _make_env(config)
@@ -265,6 +273,8 @@ def _collect_episodes(config: CollectConfig) -> CollectResult:
         }
         if source.env_name is not None:  # a user's env: what made the data, and where its table is
             attrs |= {"env": source.env_name, "expert": _name(config.expert), "table_height": config.table_height}
+        if not (Path(config.out).exists() and EpisodeStore.open(config.out).n_episodes):
+            check_first_frame(env, source, config)  # before anything is written
         store = EpisodeStore.open_or_create(config.out, attrs)
         existing = dict(store.attrs)
         existing.setdefault("follow_through_s", 0.0)  # stores from before it ended at the first success
@@ -282,16 +292,26 @@ def _collect_episodes(config: CollectConfig) -> CollectResult:
                    disable=not config.progress, unit="ep")
         try:
             for index in range(store.n_episodes, config.episodes):
+                failed, unseen = [], []
                 for attempt in range(MAX_TRIES):
                     episode_seed = config.seed + index + attempt * SEED_STRIDE
-                    episode, held, camera = record_episode(env, observer, episode_seed, config, expert, source)
+                    try:
+                        episode, held, camera = record_episode(env, observer, episode_seed, config, expert, source)
+                    except UnrecordableEpisode:
+                        unseen.append(episode_seed)
+                        continue
                     if episode is not None:
                         break
-                    result.failed_seeds.append(episode_seed)
+                    failed.append(episode_seed)
                 else:
-                    raise CollectionError(f"the {source.task} expert failed on {MAX_TRIES} seeds for episode "
-                                          f"{index} (seeds {result.failed_seeds[-MAX_TRIES:]})")
-                store.append_episode(episode)
+                    causes = [f"the {source.task} expert failed on {len(failed)} seeds {failed}"] if failed else []
+                    if unseen:
+                        causes.append(f"an object was out of view in the first frame on {len(unseen)} seeds "
+                                      f"{unseen} (at --image-size {config.image_size})")
+                    raise CollectionError(" and ".join(causes) + f" for episode {index}")
+                result.failed_seeds += failed
+                result.unseen_seeds += unseen
+                append_episode(store, episode, config.out)
                 seeds.append(episode_seed)
                 held_total += held
                 result.added += 1
@@ -388,8 +408,14 @@ def _name(value) -> str | None:
 def record_episode(env, observer, seed: int, config: CollectConfig, expert: Callable | None = None,
                    source: _Source | None = None) -> tuple[dict[str, np.ndarray] | None, int, dict | None]:
     """Run the expert on `seed`; the episode's arrays if it succeeded, else None. Also the held-cloud count
-    and the camera of the last frame (`PinholeCamera.to_dict()`)."""
-    from lano3dp.policy.observations import RecordContext, UnrecordableEpisode, held_frames, recorders
+    and the camera of the last frame (`PinholeCamera.to_dict()`).
+
+    Raises:
+        UnrecordableEpisode: a recorder cannot record this seed (a slot out of view in the first frame).
+        ExpertError: the expert raised or returned something that is not a finite (10,) action.
+    """
+    from lano3dp.env_factory import EnvContractError
+    from lano3dp.policy.observations import RecordContext, held_frames, recorders, task_inputs_of
 
     expert = OpenLoopPlan() if expert is None else expert
     source = _Source.of(env, "the env", config) if source is None else source
@@ -400,26 +426,26 @@ def record_episode(env, observer, seed: int, config: CollectConfig, expert: Call
     phrases = [named.get(slot, source.phrases[slot]) for slot in source.slots]
     # every registered observation type's input: the built-in ones, and a user's registered before collecting
     record = recorders(RecordContext(observer, tuple(phrases), config))
-    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("action", "state", *record)}
+    # the task inputs the env hands over (obs["goal"], ...): those of registered types its first observation holds
+    task_inputs = list(task_inputs_of(obs))
+    rows: dict[str, list[np.ndarray]] = {k: [] for k in ("action", "state", *record, *task_inputs)}
     follow_steps = int(round(config.follow_through_s * source.control_hz))
     first_success = last_success = None  # step indices
     noise = DartNoise(config.dart_noise, seed, getattr(expert, "actions", None), source.control_hz)
     frame = None
     for t in range(source.max_steps + follow_steps):
         frame, state = observe(env, obs)
-        try:
-            visual = {key: recorder(frame) for key, recorder in record.items()}
-        except UnrecordableEpisode:  # e.g. a slot out of view in the first frame
-            return None, 0, None
-        action = np.asarray(expert(env, obs, info), dtype=np.float32)
-        if action.shape != (10,):
-            raise CollectionError(f"the expert returned an action of shape {action.shape}; it must be (10,): "
-                                  "position (m), rotation 6D, gripper (0 open .. 1 closed), absolute")
+        # an UnrecordableEpisode here (e.g. a slot out of view in the first frame) discards the seed (the caller)
+        visual = {key: recorder(frame) for key, recorder in record.items()}
+        action = checked_action(expert, env, obs, info, seed=seed, step=t, label=_expert_label(config))
         rows["action"].append(action)
         rows["state"].append(state)
-        for key, value in visual.items():
+        for key, value in (visual | task_inputs_of(obs, task_inputs)).items():
             rows[key].append(value)
-        obs, _, terminated, truncated, info = env.step(noise.perturb(action, t))
+        try:
+            obs, _, terminated, truncated, info = env.step(noise.perturb(action, t))
+        except EnvContractError as error:  # a demonstration is never recorded from a broken env: say which seed
+            raise type(error)(f"{error} (seed {seed})") from None
         if info.get("success"):
             first_success = t if first_success is None else first_success
             last_success = t
@@ -436,6 +462,82 @@ def record_episode(env, observer, seed: int, config: CollectConfig, expert: Call
     camera = getattr(getattr(env, "env", env), "camera", None)
     camera = camera if hasattr(camera, "to_dict") else frame.camera
     return episode, held_frames(record), camera.to_dict()
+
+
+ACTION_LAYOUT = "(10,) finite numbers: position (m), rotation 6D, gripper (0 open .. 1 closed), absolute"
+
+
+def _expert_label(config: CollectConfig) -> str:
+    if config.expert is None:
+        return "the scripted expert" if config.env is None else "the env's expert_plan()"
+    return f"--expert {config.expert}" if isinstance(config.expert, str) else f"the expert {_name(config.expert)}"
+
+
+def checked_action(expert: Callable, env, obs, info, *, seed: int, step: int, label: str) -> np.ndarray:
+    """The expert's action for this step as (10,) float32, checked at the boundary: a raise, a wrong shape or
+    type, or a NaN is an ExpertError naming the expert, the seed and step, and what was expected."""
+    where = f"seed {seed}, step {step}"
+    try:
+        raw = expert(env, obs, info)
+    except Lano3dpError:
+        raise
+    except Exception as error:  # the user's code: one line naming it, not its traceback (--debug shows that)
+        text = " ".join(str(error).split())
+        raise ExpertError(f"{label} raised {type(error).__name__}{': ' + text if text else ''} ({where})") \
+            from error
+    try:
+        action = np.asarray(raw, dtype=np.float32)
+    except (TypeError, ValueError):
+        raise ExpertError(f"{label} returned {type(raw).__name__} {raw!r:.60} ({where}); it must be "
+                          f"{ACTION_LAYOUT}") from None
+    if action.shape != (10,):
+        raise ExpertError(f"{label} returned an action of shape {action.shape} ({where}); it must be "
+                          f"{ACTION_LAYOUT}")
+    bad = np.flatnonzero(~np.isfinite(action))
+    if len(bad):
+        raise ExpertError(f"{label} returned {action[bad[0]]} at action[{bad[0]}] ({where}); it must be "
+                          f"{ACTION_LAYOUT}")
+    return action
+
+
+def check_first_frame(env, source: _Source, config: CollectConfig) -> None:
+    """Before anything is written: at the first seed, every object slot has `min_points` points in view.
+
+    Too small an image (`--image-size 16`) leaves an object a few pixels, which would otherwise be reported, ten
+    seeds later, as failed episodes. Checked only below the default size (128 px), where the size is the likely
+    cause; at or above it an object out of view is left to the seed retries (occlusion in one scene)."""
+    from lano3dp.perception import ObjectObserver, PerceptionError, SimOracleSegmenter
+
+    if config.image_size >= CollectConfig.image_size:
+        return
+    obs, info = env.reset(seed=config.seed)
+    frame, _ = observe(env, obs)
+    observer = ObjectObserver(SimOracleSegmenter(), n_points=config.n_points, crop_low=config.crop_low,
+                              crop_high=config.crop_high, min_points=1, seed=0)
+    named = info.get("target_phrases") or {}
+    for slot in source.slots:
+        phrase = named.get(slot, source.phrases[slot])
+        try:
+            count = int(observer.observe(frame, [phrase]).point_counts[0])
+        except PerceptionError:
+            count = 0
+        if count < config.min_points:
+            raise CollectionError(f"--image-size {config.image_size} is too small for {source.task}: the camera sees "
+                                  f"{count} points of {phrase!r} in the first frame of seed {config.seed}, and "
+                                  f"each object needs {config.min_points}; use a larger --image-size (default "
+                                  f"{CollectConfig.image_size})")
+
+
+def append_episode(store: EpisodeStore, episode: Mapping[str, np.ndarray], out: Path) -> None:
+    """Append one episode; a write that fails (a full disk) is one line naming the store, which still holds
+    every episode it held before (the episode count is written last, `EpisodeStore.append_episode`)."""
+    from lano3dp.errors import StorageError, describe_os_error
+
+    try:
+        store.append_episode(episode)
+    except OSError as error:
+        raise StorageError(out, f"adding episode {store.n_episodes} failed ({describe_os_error(error)}); the "
+                                f"dataset still holds its {store.n_episodes} complete episodes") from error
 
 
 class DartNoise:

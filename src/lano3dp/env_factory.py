@@ -34,8 +34,11 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from lano3dp.errors import Lano3dpError
 
+BUILTIN_LABEL = "the built-in simulator"
 _FILE_MODULES: dict[str, Path] = {}  # module name given to a factory file -> that file
 ENV_OPTIONS = ("task", "seed", "variation", "image_size", "render_rgb", "max_steps")
 _PROTOCOL = ("an env needs reset(seed=, options=) -> (obs, info) and step(action) -> "
@@ -48,6 +51,11 @@ class EnvFactoryError(Lano3dpError, ValueError):
 
 class EnvContractError(Lano3dpError, ValueError):
     """An env broke the protocol while running (a reset or step returned the wrong thing)."""
+
+
+class NonFiniteObservationError(EnvContractError):
+    """An env's observation after a step held NaN or inf: the episode ends with this as its error (a simulation
+    that blew up), the evaluation goes on."""
 
 
 def builtin_env(task: str, *, seed: int | None = None, variation: str = "clean", image_size: int = 128,
@@ -154,7 +162,7 @@ def make_env(spec: str | Callable | None, **options: Any):
     if unknown:
         raise TypeError(f"unknown env options {sorted(unknown)}; known: {', '.join(ENV_OPTIONS)}")
     if is_builtin(spec):
-        return CheckedEnv(builtin_env(**options), "the built-in simulator")
+        return CheckedEnv(builtin_env(**options), BUILTIN_LABEL)
     factory = load_factory(spec) if isinstance(spec, str) else spec
     label = spec if isinstance(spec, str) else getattr(factory, "__qualname__", repr(factory))
     accepted = accepted_options(factory, options)
@@ -186,6 +194,13 @@ def accepted_options(factory: Callable, options: Mapping[str, Any]) -> dict[str,
 class CheckedEnv:
     """An env with its replies checked against the protocol, and a note of whether it ever reports success.
 
+    Checked: every reply's form (reset -> (obs, info), step -> 5 values, info a dict), every observation's
+    "state" ((11,) real numbers, finite), and, on the first reset, the camera part of the observation (an
+    RGBDFrame, or "rgb" (H, W, 3) uint8, "depth" (H, W), "intrinsics" (3, 3) and "cam_to_world" (4, 4) finite;
+    or the env's frame()). A violation is an `EnvContractError` naming the env, the key and what was expected;
+    non-finite values after a step are a `NonFiniteObservationError` (one of them), which ends that episode
+    with a recorded error (`runtime.rollout`) rather than the evaluation.
+
     Every other attribute (frame, control_hz, max_steps, episode, ...) is the wrapped env's own, so code that
     asks for a simulator-only attribute with getattr(env, name, None) still sees whether the env has it.
 
@@ -199,6 +214,8 @@ class CheckedEnv:
         self.env = env
         self.label = label
         self.reports_success = False
+        self.steps = 0  # since the last reset, for messages
+        self._frame_checked = label == BUILTIN_LABEL  # the built-in simulator's camera is trusted
 
     def __getattr__(self, name: str):
         if name == "env":  # not set yet (unpickling): no recursion
@@ -210,17 +227,22 @@ class CheckedEnv:
         if not (isinstance(reply, tuple) and len(reply) == 2):
             raise EnvContractError(f"{self.label}: reset() must return (obs, info), got {_describe(reply)}")
         obs, info = reply
+        self.steps = 0
         self._check(obs, info, "reset()")
+        if not self._frame_checked:
+            self._check_frame(obs, "reset()")
+            self._frame_checked = True
         self.reports_success = "success" in info
         return obs, info
 
     def step(self, action):
         reply = self.env.step(action)
+        self.steps += 1
         if not (isinstance(reply, tuple) and len(reply) == 5):
             raise EnvContractError(f"{self.label}: step() must return (obs, reward, terminated, truncated, info), "
                                    f"got {_describe(reply)}")
         obs, info = reply[0], reply[4]
-        self._check(obs, info, "step()")
+        self._check(obs, info, f"step {self.steps}")
         self.reports_success = self.reports_success or "success" in info
         return reply
 
@@ -230,6 +252,7 @@ class CheckedEnv:
         if isinstance(obs, Mapping):
             keys = set(obs)
         elif hasattr(obs, "state") and hasattr(obs, "frame"):
+            self._check_state(obs.state, call)
             return
         else:
             raise EnvContractError(f"{self.label}: {call} returned {_describe(obs)} as observation; "
@@ -238,6 +261,7 @@ class CheckedEnv:
         if "state" not in keys:
             raise EnvContractError(f"{self.label}: {call}'s observation has no 'state' (11,: EE position, rotation "
                                    f"6D, gripper opening, grasp flag); its keys: {', '.join(sorted(map(str, keys)))}")
+        self._check_state(obs["state"], call)
         if "frame" in keys or callable(getattr(self.env, "frame", None)):
             return
         missing = [k for k in ("depth", "intrinsics", "cam_to_world") if k not in keys]
@@ -245,6 +269,57 @@ class CheckedEnv:
             raise EnvContractError(f"{self.label}: {call}'s observation has no 'frame' and no "
                                    f"{', '.join(repr(m) for m in missing)}, and the env has no frame(); give an "
                                    "RGBDFrame as obs['frame'] or the camera's images and calibration")
+
+    def _check_state(self, state, call: str) -> None:
+        expected = "(11,) finite numbers: EE position (m), rotation 6D, gripper opening (m), grasp flag"
+        try:
+            array = np.asarray(state)
+        except (ValueError, TypeError):
+            array = None
+        if array is None or array.dtype.kind not in "fiu" or array.shape != (11,):
+            found = _describe(state) if array is None else f"{array.dtype} of shape {array.shape}"
+            raise EnvContractError(f"{self.label}: {call}'s observation 'state' must be {expected}; got {found}")
+        bad = np.flatnonzero(~np.isfinite(array.astype(np.float64)))
+        if len(bad):
+            error = NonFiniteObservationError if self.steps else EnvContractError
+            raise error(f"{self.label}: {call}'s observation 'state' holds {array[bad[0]]} at index {bad[0]}; "
+                        f"it must be {expected}")
+
+    def _check_frame(self, obs, call: str) -> None:
+        """The camera part of the first observation: keys, shapes, dtypes, a finite calibration."""
+        from lano3dp.geometry import RGBDFrame
+        from lano3dp.geometry.frame import observe
+
+        if isinstance(obs, Mapping) and "frame" not in obs and not callable(getattr(self.env, "frame", None)):
+            for key, shape, kinds in (("depth", ("H", "W"), "f"), ("intrinsics", (3, 3), "fi"),
+                                      ("cam_to_world", (4, 4), "fi"), ("rgb", ("H", "W", 3), "u")):
+                if key in obs:
+                    self._check_array(obs[key], key, shape, kinds, call, finite=key in ("intrinsics", "cam_to_world"))
+        try:
+            frame, _ = observe(self.env, obs)
+        except (KeyError, ValueError, TypeError) as error:
+            raise EnvContractError(f"{self.label}: {call}'s observation does not make a camera frame: "
+                                   f"{_one_line(error)}") from None
+        if not isinstance(frame, RGBDFrame):
+            raise EnvContractError(f"{self.label}: frame() returned {_describe(frame)}, not an RGBDFrame")
+        self._check_array(frame.rgb, "frame rgb", ("H", "W", 3), "u", call, finite=False)  # PinholeCamera checks
+        # its own calibration
+
+    def _check_array(self, value, key: str, shape: tuple, kinds: str, call: str, *, finite: bool) -> None:
+        names = {"f": "float", "i": "int", "u": "uint8"}  # depth: float metres (a uint16 in mm would pass as km)
+        expected = f"({', '.join(map(str, shape))}{',' if len(shape) == 1 else ''}) " \
+                   f"{' or '.join(names[k] for k in kinds)}{', finite' if finite else ''}"
+        array = np.asarray(value) if isinstance(value, np.ndarray | list | tuple) or hasattr(value, "__array__") \
+            else None
+        ok = array is not None and array.ndim == len(shape) and array.dtype.kind in kinds and all(
+            want in ("H", "W") or want == got for want, got in zip(shape, array.shape, strict=True)) and \
+            (kinds != "u" or array.dtype == np.uint8)
+        if not ok:
+            found = _describe(value) if array is None else f"{array.dtype} of shape {array.shape}"
+            raise EnvContractError(f"{self.label}: {call}'s observation {key!r} must be {expected}; got {found}")
+        if finite and not np.isfinite(array).all():
+            raise EnvContractError(f"{self.label}: {call}'s observation {key!r} must be {expected}; it holds "
+                                   "NaN or inf")
 
     def close(self) -> None:
         close = getattr(self.env, "close", None)

@@ -1,8 +1,9 @@
 """A graph of cells (collect, train, evaluate) run in this process, in a process pool, or on a Ray cluster.
 
-A protocol (bench/bench_protocol.py) is written as a list of `Cell`s: small picklable descriptions of one
-unit of work each (its kind, its JSON-able parameters, the cells whose outputs it reads, the file or folder it
-writes, the CPU cores it keeps busy). An executor runs the cells a graph still needs, each after its inputs:
+A graph of work (a benchmark's datasets, trainings and evaluations) is written as a list of `Cell`s: small
+picklable descriptions of one unit of work each (its kind, its JSON-able parameters, the cells whose outputs it
+reads, the file or folder it writes, the CPU cores it keeps busy). An executor runs the cells a graph still
+needs, each after its inputs:
 
     LocalExecutor(workers=1)    in this process, in dependency order
     LocalExecutor(workers=N)    a pool of spawned processes, at most N cores' worth of cells at a time
@@ -410,17 +411,15 @@ def _train_done(cell: Cell) -> bool:
 
 
 def eval_cell(name: str, config, *, inputs: Iterable[str] = ()) -> Cell:
-    """Evaluate an `evaluate.EvalConfig` (its `out` is the cell's output); its workers are the cell's CPUs."""
-    from dataclasses import asdict
-
+    """Evaluate an `evaluation.EvalConfig` (its `out` is the cell's output); its workers are the cell's CPUs."""
     if not config.out:
         raise ValueError(f"eval cell {name!r} needs an EvalConfig with out: the file that marks it done")
-    return Cell(name, "eval", json.loads(json.dumps(asdict(config))), output=config.out, inputs=tuple(inputs),
+    return Cell(name, "eval", config.to_dict(), output=config.out, inputs=tuple(inputs),
                 cpus=config.workers)
 
 
 def _eval_config(cell: Cell):
-    from lano3dp.evaluate import EvalConfig
+    from lano3dp.evaluation import EvalConfig
 
     return EvalConfig.from_dict(cell.params)
 

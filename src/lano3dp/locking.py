@@ -18,7 +18,7 @@ import fcntl
 import os
 from pathlib import Path
 
-from lano3dp.errors import Lano3dpError
+from lano3dp.errors import Lano3dpError, StorageError, describe_os_error
 
 LOCK_SUFFIX = ".lock"
 
@@ -34,7 +34,9 @@ class LockedError(Lano3dpError, RuntimeError):
 
 
 def lock_path(target: str | Path) -> Path:
-    target = Path(target).absolute()
+    """The lock file of `target`: beside the folder or file it names, reached through any symlink, so two
+    spellings of one output (a link and its target) take the same lock."""
+    target = Path(target).resolve()
     return target.with_name(target.name + LOCK_SUFFIX)
 
 
@@ -67,7 +69,10 @@ class WriteLock:
             return self
         prepare_parent(self.path)
         for _ in range(100):  # retries only when the file was removed between our open and our lock
-            fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as error:  # a read-only folder: one line naming the lock file
+                raise StorageError(self.path, describe_os_error(error)) from error
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError as error:

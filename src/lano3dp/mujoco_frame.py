@@ -3,6 +3,9 @@
     renderer = mujoco.Renderer(model, 96, 96)              # once; reused every step
     frame = mujoco_frame(model, data, "front", {"block": ["block"], "drawer": ["drawer_body"]},
                          96, 96, renderer=renderer, attributes={"block": {"color": "red"}})
+    free = mujoco.MjvCamera()                              # or a camera the model does not have
+    free.lookat, free.distance, free.azimuth, free.elevation = [1.3, 0.75, 0.45], 1.2, 180.0, -45.0
+    frame = mujoco_frame(model, data, free, {"block": ["object0"]}, 96, 96, renderer=renderer)
 
 Each slot names MuJoCo bodies or geoms; a body covers its own geoms and those of every body below it (a drawer
 with its handle). The frame's `segmentation` holds the slot's index where a slot's geom is seen and -1
@@ -29,8 +32,20 @@ class MujocoFrameError(Lano3dpError, ValueError):
     """A camera, body or geom named for a frame is not in the model, or the renderer does not fit it."""
 
 
-def mujoco_camera(model, data, camera: str | int, width: int, height: int) -> PinholeCamera:
-    """Intrinsics and OpenCV camera-to-world pose of a model camera, as `data` holds it (after mj_forward)."""
+def mujoco_camera(model, data, camera, width: int, height: int) -> PinholeCamera:
+    """Intrinsics and OpenCV camera-to-world pose of a model camera (name or id), or of a free `mujoco.MjvCamera`
+    (lookat, distance, azimuth, elevation; the model's visual fovy), as `data` holds it (after mj_forward)."""
+    import mujoco
+
+    if isinstance(camera, mujoco.MjvCamera):
+        scene = mujoco.MjvScene(model, maxgeom=1)
+        mujoco.mjv_updateCamera(model, data, camera, scene)
+        eyes = scene.camera  # two eyes, apart only in stereo: their midpoint is the head
+        position = (np.asarray(eyes[0].pos) + np.asarray(eyes[1].pos)) / 2
+        forward, up = np.asarray(eyes[0].forward, dtype=np.float64), np.asarray(eyes[0].up, dtype=np.float64)
+        pose = PinholeCamera.opengl_pose_to_cam_to_world(position, np.column_stack([np.cross(forward, up), up,
+                                                                                    -forward]))
+        return PinholeCamera.from_fovy(width, height, float(model.vis.global_.fovy), pose)
     camera_id = _camera_id(model, camera)
     pose = PinholeCamera.opengl_pose_to_cam_to_world(data.cam_xpos[camera_id], data.cam_xmat[camera_id].reshape(3, 3))
     return PinholeCamera.from_fovy(width, height, float(model.cam_fovy[camera_id]), pose)
@@ -65,14 +80,15 @@ def slot_geoms(model, slots: Mapping[str, Sequence[str]]) -> dict[str, np.ndarra
     return geoms
 
 
-def mujoco_frame(model, data, camera: str | int, slots: Mapping[str, Sequence[str]], width: int, height: int,
+def mujoco_frame(model, data, camera, slots: Mapping[str, Sequence[str]], width: int, height: int,
                  renderer=None, *, attributes: Mapping[str, Mapping[str, str]] | None = None, rgb: bool = True,
                  timestamp: float | None = None) -> RGBDFrame:
     """Render one camera of `model` as an `RGBDFrame` with the slots' instance segmentation.
 
     Args:
         model, data: the MuJoCo model and its current state (`mj_forward` or `mj_step` ran since the last change).
-        camera: a camera name or id of the model.
+        camera: a camera name or id of the model, or a free `mujoco.MjvCamera` (a model without a camera on the
+            scene: the view a gymnasium MuJoCo env's viewer uses).
         slots: {slot name: body or geom names}; the slot names are what the policy's slots and phrases say.
         width, height: image size in pixels (at most the model's offscreen buffer, <visual><global offwidth>).
         renderer: a `mujoco.Renderer(model, height, width)` to reuse (keep one per env); None makes and closes
@@ -87,7 +103,7 @@ def mujoco_frame(model, data, camera: str | int, slots: Mapping[str, Sequence[st
     """
     import mujoco
 
-    camera_id = _camera_id(model, camera)
+    camera_id = camera if isinstance(camera, mujoco.MjvCamera) else _camera_id(model, camera)
     own = renderer is None
     if own:
         _check_buffer(model, width, height)

@@ -7,7 +7,7 @@ benchmark with the same output folder continues where it stopped:
     train_stage      a training run up to its step count (the trainer resumes from its last checkpoint);
                      with a CPU-time budget the step count is chosen once, from a short timing probe,
                      and saved in the run's train_config.json, so a resumed run keeps it
-    eval_stage       a results JSON, reused when it was made with the same EvalConfig
+    eval_stage       a results JSON, reused when it is current (same evaluation, same behaviour version)
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -57,46 +56,6 @@ def collect_stage(task: str, episodes: int, out: str | Path, *, log: Log = _quie
 
 
 # ---- train -----------------------------------------------------------------------------------------
-def time_training_step(data: str | Path, policy_config, batch_size: int, *, warmup: int = 3, steps: int = 8,
-                       seed: int = 0) -> float:
-    """CPU seconds per optimisation step of `policy_config` on `data` at this batch size, measured here and now.
-
-    A throwaway model does `warmup` + `steps` real steps (batch assembly, forward, backward, fused AdamW) and
-    the median of the process CPU time per step is returned: what a CPU-time budget buys, nearly
-    independent of other jobs on the machine. Used only to turn a budget into a step count.
-    """
-    import numpy as np
-    import torch
-    from torch.utils.data import default_collate
-
-    from lano3dp.data import SequenceDataset
-    from lano3dp.policy import DiffusionPolicy
-
-    dataset = SequenceDataset(data, obs_keys=policy_config.obs_keys, n_obs_steps=policy_config.n_obs_steps,
-                              horizon=policy_config.horizon, n_action_steps=policy_config.n_action_steps)
-    torch.manual_seed(seed)
-    policy = DiffusionPolicy(policy_config)
-    policy.fit_normalizer(dataset)
-    optimizer = torch.optim.AdamW(policy.parameters(), lr=1e-4, fused=True)
-    rng = np.random.default_rng(seed)
-    generator = torch.Generator().manual_seed(seed)
-    times = []
-    for index in range(warmup + steps):
-        started = time.process_time()
-        batch = default_collate([dataset[int(i)] for i in rng.integers(0, len(dataset), batch_size)])
-        loss = policy.compute_loss(batch, generator=generator)
-        optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        optimizer.step()
-        if index >= warmup:
-            times.append(time.process_time() - started)
-    return float(np.median(times))
-
-
-# Validation losses, EMA updates and checkpoints on top of the probed steps (measured: 3-6%).
-_TRAINING_OVERHEAD = 1.06
-
-
 def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps: int | None = None,
                 minutes: float | None = None, min_steps: int = 50, max_steps: int = 50_000, batch_size: int = 64,
                 lr: float = 1e-3, warmup_steps: int | None = None, ckpt_every: int | None = None,
@@ -104,12 +63,13 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
                 **train_options) -> Path:
     """Train (or resume, or skip) a policy run; returns its final checkpoint folder.
 
-    Give `steps`, or `minutes`: a budget of CPU time (this process, all threads) for the optimisation. The
-    planned step count comes from a short timing probe (`time_training_step`); the trainer stops at the budget
-    if the steps turn out dearer than probed, and its learning rate follows whichever ends first, the steps
-    or the budget (`train.training_progress`), so such a run still ends with the rate decayed. An existing
-    run keeps the step count and budget it was started with; a run stopped by its budget counts as complete. Without
-    `ckpt_every`, the run checkpoints `n_checkpoints` times, evenly along its planned steps.
+    Give `steps`, or `minutes`: a budget of CPU time (this process, all threads) the run plans for. The step
+    count then comes from a short timing probe (`train.plan_budget`, the planning `lano3dp train --minutes`
+    uses too), lowered to `steps` when both are given; the trainer stops at the budget if the steps turn out
+    dearer than probed, and its learning rate follows whichever ends first, the steps or the budget
+    (`train.training_progress`), so such a run still ends with the rate decayed. An existing run keeps the step
+    count and budget it was started with; a run stopped by its budget counts as complete. Without `ckpt_every`,
+    the run checkpoints `n_checkpoints` times, evenly along its planned steps.
 
     One torch thread by default: under a CPU-time budget it buys the most steps (two threads run a step at
     most ~1.6x faster for twice the CPU, and spin-wait to several times slower on a busy machine).
@@ -117,7 +77,7 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
     import torch
 
     from lano3dp.policy.checkpoint import checkpoint_name, list_checkpoints
-    from lano3dp.train import TrainConfig, Trainer, policy_config_for_dataset
+    from lano3dp.train import TrainConfig, Trainer, default_warmup_steps, plan_budget, policy_config_for_dataset
 
     torch.set_num_threads(threads)  # before the timing probe, so it times what the run will do
 
@@ -125,8 +85,9 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
     saved = run / "train_config.json"
     if saved.exists():
         config = TrainConfig.from_dict(json.loads(saved.read_text()))
-        if steps is not None and steps != config.steps:
-            raise ValueError(f"{run} was started for {config.steps} steps, not {steps}; use another folder "
+        started_for = config.budget_plan.step_cap if config.budget_plan is not None else config.steps
+        if steps is not None and steps != started_for:
+            raise ValueError(f"{run} was started for {started_for} steps, not {steps}; use another folder "
                              "(or the same step count to resume)")
         done = max((step for step, _ in list_checkpoints(run / "checkpoints")), default=0)
         if done >= config.steps or config.extra.get("stopped_by_budget_at") == done > 0:
@@ -135,17 +96,21 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
         log(f"train: resuming {run} at step {done} of {config.steps}")
     else:
         policy_config = policy_config or policy_config_for_dataset(data)
-        if steps is None:
-            if minutes is None:
-                raise ValueError("train_stage needs steps or minutes")
-            seconds = time_training_step(data, policy_config, batch_size, seed=seed) * _TRAINING_OVERHEAD
-            steps = int(min(max(minutes * 60 / seconds, min_steps), max_steps))
-            log(f"train: {seconds:.3f} CPU-s/step measured now -> {steps} steps fit {minutes:g} CPU-min")
-        warmup = warmup_steps if warmup_steps is not None else min(500, max(steps // 20, 10))
+        plan = None
+        if minutes is not None:
+            plan = plan_budget(data, policy_config, batch_size, minutes, step_cap=steps, seed=seed,
+                               augment=train_options.get("augment"), min_steps=min_steps, max_steps=max_steps)
+            steps = plan.steps
+            capped = f", capped at {plan.step_cap}" if plan.steps < plan.budget_steps else ""
+            log(f"train: {plan.probe_cpu_s_per_step:.3f} CPU-s/step measured now -> {plan.budget_steps} steps fit "
+                f"{minutes:g} CPU-min{capped}")
+        elif steps is None:
+            raise ValueError("train_stage needs steps or minutes")
+        warmup = warmup_steps if warmup_steps is not None else default_warmup_steps(steps)
         every = ckpt_every or max(1, -(-steps // n_checkpoints))
         config = TrainConfig(data=str(data), out=str(run), policy=policy_config, steps=steps, batch_size=batch_size,
                              lr=lr, warmup_steps=warmup, ckpt_every=every, val_every=every, seed=seed,
-                             cpu_minutes=minutes, threads=threads, **train_options)
+                             cpu_minutes=minutes, budget_plan=plan, threads=threads, **train_options)
         log(f"train: {steps} steps, batch {batch_size}, lr {lr:g}, UNet {tuple(policy_config.down_dims)} -> {run}")
     started = time.perf_counter()
     trainer = Trainer(config)
@@ -161,38 +126,28 @@ def train_stage(data: str | Path, run: str | Path, *, policy_config=None, steps:
 
 
 # ---- evaluate --------------------------------------------------------------------------------------
-def _weights_newer_than(checkpoint: str, results: Path) -> bool:
-    """Whether the policy weights in `checkpoint` were written after `results` (False when there are none)."""
-    from lano3dp.policy.modeling import WEIGHTS_NAME, resolve_checkpoint
-
-    try:
-        weights = resolve_checkpoint(checkpoint) / WEIGHTS_NAME
-        return weights.stat().st_mtime > results.stat().st_mtime
-    except FileNotFoundError:
-        return False
-
-
 def cached_eval(config) -> dict[str, Any] | None:
-    """The results in `config.out` if they were made with this EvalConfig (up to the worker count) and the
-    checkpoint's weights are not newer than them, else None. The weights matter because a folder can be
-    re-written in place (a re-packaged policy keeps its path): its old results would otherwise be reused. The
-    guidance compared is what runs: with the checkpoint's tuning laid over it (`evaluate.tuned_config`)."""
-    from lano3dp.evaluate import measured_config, saved_config, tuned_config
+    """The results in `config.out` if they are current: made by code of this behaviour version, with this
+    evaluation's identity (the config up to where it writes, the guidance that runs, the exact weights), else
+    None. A folder re-written in place (a re-packaged policy keeps its path) has other weights, so its old
+    results are not reused."""
+    from lano3dp.evaluation.evaluator import current_identity
+    from lano3dp.provenance import result_is_current
 
-    if config.out and Path(config.out).exists() and not _weights_newer_than(config.checkpoint, Path(config.out)):
+    if not (config.out and Path(config.out).exists()):
+        return None
+    try:
         previous = json.loads(Path(config.out).read_text())
-        wanted = measured_config(json.loads(json.dumps(asdict(tuned_config(config, config.checkpoint)))))
-        # results saved before a field existed were made with its default (e.g. segmenter "sim"), and flat ones
-        # (saved before the settings were nested) are read into their sections
-        made = measured_config(saved_config(previous.get("config") or {}))
-        if made == wanted:
-            return previous
+    except ValueError:
+        return None  # a results file cut short: evaluate again
+    if result_is_current(previous) and previous.get("identity") == json.loads(json.dumps(current_identity(config))):
+        return previous
     return None
 
 
 def eval_stage(config, *, log: Log = _quiet, progress=None, command: str | None = None) -> dict[str, Any]:
-    """Evaluate unless `config.out` already holds results made with this EvalConfig (see `cached_eval`)."""
-    from lano3dp.evaluate import evaluate
+    """Evaluate unless `config.out` already holds current results of this evaluation (see `cached_eval`)."""
+    from lano3dp.evaluation import evaluate
 
     if (previous := cached_eval(config)) is not None:
         log(f"eval: {config.out} is up to date; skipping")

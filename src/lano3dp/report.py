@@ -67,12 +67,47 @@ def plot_top_view(path: str | Path, runs: Sequence[tuple[str, np.ndarray]], *,
 
 
 def _save_figure(plt, fig, path: str | Path) -> Path:
+    """Save through a temporary file, renamed into place once it reads back as an image of the figure's size; a
+    failure (a full disk) removes it, keeps an older figure and raises StorageError naming `path`."""
+    import os
+
+    from lano3dp.errors import StorageError, describe_os_error
+    from lano3dp.jsonio import discard
+
     fig.tight_layout()
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
+    temporary = path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")  # the suffix tells the format
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(temporary)
+        _check_image(temporary)
+        os.replace(temporary, path)
+    except OSError as error:
+        discard(temporary)
+        raise StorageError(path, error.cause if isinstance(error, StorageError) else describe_os_error(error)) \
+            from error
+    except BaseException:
+        discard(temporary)
+        raise
+    finally:
+        plt.close(fig)
     return path
+
+
+def _check_image(path: Path) -> None:
+    """A raster image reads back whole (Pillow decodes it); other formats (SVG, PDF) must not be empty."""
+    from lano3dp.errors import StorageError
+
+    if path.stat().st_size == 0:
+        raise StorageError(path, "0 bytes written")
+    if path.suffix.lower() in (".png", ".jpg", ".jpeg"):
+        from PIL import Image
+
+        try:
+            with Image.open(path) as image:
+                image.load()
+        except (OSError, ValueError, SyntaxError) as error:
+            raise StorageError(path, f"the image does not read back ({error})") from None
 
 def plot_rates(path: str | Path, conditions: Sequence[tuple[str, Mapping[str, Any]]], *,
                title: str = "closed-loop evaluation") -> Path:

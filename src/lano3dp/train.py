@@ -28,14 +28,15 @@ import time
 from contextlib import nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
 
-from lano3dp.augment import AugmentConfig, augment_batch
+from lano3dp.augment import AugmentConfig, augment_batch, widened_stats
 from lano3dp.data import EpisodeStore, SequenceDataset, split_episodes
 from lano3dp.errors import CorruptFileError, Lano3dpError
+from lano3dp.jsonio import write_text_atomic
 from lano3dp.locking import WriteLock
 from lano3dp.policy import DiffusionPolicy, PolicyConfig
 from lano3dp.policy.checkpoint import (
@@ -70,14 +71,41 @@ RESUME_APPLIED_FIELDS = ("steps",)
 RESUME_FIXED_FIELDS = ("data", "batch_size", "lr", "weight_decay", "betas", "warmup_steps", "ema",
                        "ema_inv_gamma", "ema_power", "ema_max", "val_ratio", "seed", "bf16", "augment",
                        "time_stride")
-# What a train_config.json written before a field existed was trained with (the field's default today).
-FIELDS_BEFORE = {"time_stride": 1}
 
 
 def changed_fields(old: dict[str, Any], new: dict[str, Any], names=None) -> list[str]:
     """'name: old -> new' for each differing field (of `names`, default all)."""
     names = sorted(set(old) | set(new)) if names is None else names
     return [f"{name}: {old.get(name)!r} -> {new.get(name)!r}" for name in names if old.get(name) != new.get(name)]
+
+
+DEFAULT_STEPS = 3000  # a run's steps when neither they nor a CPU budget are given
+# Validation losses, EMA updates and checkpoints on top of the probed steps (measured: 3-6%).
+TRAINING_OVERHEAD = 1.06
+
+
+@dataclass(frozen=True)
+class BudgetPlan:
+    """How a CPU budget became a run's step count (`plan_budget`); saved in train_config.json.
+
+    Attributes:
+        cpu_minutes: the budget, CPU-minutes of the training process (all its threads).
+        probe_cpu_s_per_step: median CPU seconds of one optimisation step, measured by `time_training_step`
+            just before the run, on its data, policy, batch size and threads.
+        overhead: the factor for what the probe leaves out (validation, EMA, checkpoints): TRAINING_OVERHEAD.
+        budget_steps: the steps the budget buys, cpu_minutes * 60 / (probe * overhead), within [min, max] steps.
+        step_cap: the step count asked for (`--steps`), or None: the budget alone decides.
+        steps: the planned steps: budget_steps, or step_cap when that is lower.
+        threads: torch intra-op threads the probe (and so the run) used.
+    """
+
+    cpu_minutes: float
+    probe_cpu_s_per_step: float
+    overhead: float
+    budget_steps: int
+    step_cap: int | None
+    steps: int
+    threads: int
 
 
 @dataclass
@@ -104,10 +132,12 @@ class TrainConfig:
         cpu_minutes: a budget of this process's CPU time (all its threads) for the whole run, resumes
             included; the run stops, checkpointed, at the first step past it. CPU time, not wall time, so a
             busy machine does not shorten the training (other jobs slow the clock, not the count).
+        budget_plan: how `steps` was planned from `cpu_minutes` (`plan_budget`: the timing probe's CPU-s per
+            step, the cap); None when the steps were given.
         device: "cpu" or "cuda" ("cuda:<i>" is picked per rank under torchrun).
         bf16: bfloat16 autocast for the forward pass (CPU with AMX: about -19% step time for the small model).
         augment: lano3dp.augment.AugmentConfig (or its fields as a dict): a rigid planar motion of the whole
-            window, point jitter and dropout; None trains on the demonstrations as recorded.
+            window (and a vertical lift), point jitter and dropout; None trains on the demonstrations as recorded.
         time_stride: recorded steps between consecutive steps of a training window, observations and actions
             alike (1: every step). For an env recorded faster than a policy should plan: at 80 Hz, S = 4 makes a
             16-step horizon span 0.8 s instead of 0.2 s. The checkpoint carries it (PolicyConfig.time_stride) and
@@ -118,7 +148,7 @@ class TrainConfig:
     data: str
     out: str
     policy: PolicyConfig | None = None
-    steps: int = 3000
+    steps: int = DEFAULT_STEPS
     batch_size: int = 64
     lr: float = 5e-4
     weight_decay: float = 1e-6
@@ -138,6 +168,7 @@ class TrainConfig:
     num_workers: int = 0
     threads: int | None = None
     cpu_minutes: float | None = None
+    budget_plan: BudgetPlan | None = None
     device: str = "cpu"
     bf16: bool = False
     augment: AugmentConfig | None = None
@@ -150,8 +181,12 @@ class TrainConfig:
         self.betas = tuple(float(b) for b in self.betas)
         if isinstance(self.policy, dict):
             self.policy = PolicyConfig.from_dict(self.policy)
-        if isinstance(self.augment, dict):
-            self.augment = AugmentConfig(**{**self.augment, "pivot": tuple(self.augment.get("pivot", (0.45, 0.0)))})
+        if isinstance(self.budget_plan, dict):
+            self.budget_plan = BudgetPlan(**self.budget_plan)
+        if self.budget_plan is not None and self.budget_plan.cpu_minutes != self.cpu_minutes:
+            raise ValueError(f"TrainConfig: the steps were planned for {self.budget_plan.cpu_minutes} CPU-minutes, "
+                             f"the budget is {self.cpu_minutes}; plan again (plan_budget)")
+        self.augment = as_augment_config(self.augment)
         for name in ("steps", "batch_size", "val_every", "ckpt_every", "log_every", "val_batches"):
             if getattr(self, name) < 1:
                 raise ValueError(f"TrainConfig: {name} must be >= 1, got {getattr(self, name)}")
@@ -171,6 +206,7 @@ class TrainConfig:
         data = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
         data["policy"] = self.policy.to_dict() if self.policy is not None else None
         data["augment"] = self.augment.to_dict() if self.augment is not None else None
+        data["budget_plan"] = dataclasses.asdict(self.budget_plan) if self.budget_plan is not None else None
         data["betas"] = list(self.betas)
         return data
 
@@ -184,6 +220,13 @@ class TrainConfig:
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2)
+
+
+def as_augment_config(value: AugmentConfig | dict | None) -> AugmentConfig | None:
+    """An AugmentConfig from itself or its fields as a dict (train_config.json, bench recipes)."""
+    if isinstance(value, dict):
+        return AugmentConfig(**{**value, "pivot": tuple(value.get("pivot", (0.45, 0.0)))})
+    return value
 
 
 # Dataset attributes that say how an observation is made (camera resolution, crop box, points, rate).
@@ -213,10 +256,17 @@ def policy_config_for_dataset(data: str | Path, **overrides) -> PolicyConfig:
     if names:
         fields["object_names"] = tuple(names)
     shapes = _step_shapes(store)
+    task_inputs = {}
     for name in observation_type_names():
         observation = get_observation_type(name)
-        if observation.key in shapes:
+        if observation.key not in shapes:
+            continue
+        if observation.source == "obs":  # a task input the env handed over (obs["goal"]): the policy takes it too
+            task_inputs[observation.key] = int(np.prod(shapes[observation.key]))
+        else:
             fields |= observation.dataset_fields(shapes[observation.key])
+    if task_inputs:
+        fields["task_inputs"] = task_inputs
     fields["extra"] = {key: store.attrs[key] for key in ("skill", "task") if key in store.attrs}
     # How the observations were made travels with the policy, so a checkpoint acts without its dataset.
     fields["extra"]["observation"] = observation_settings(store.attrs)
@@ -275,8 +325,131 @@ def cosine_with_warmup(progress: float, step: int, warmup_steps: int, steps: int
     return max(0.0, 0.5 * (1.0 + math.cos(math.pi * min(max(after_warmup, 0.0), 1.0))))
 
 
+def default_warmup_steps(steps: int) -> int:
+    """Warm-up for a run of `steps` steps when none is given: a twentieth of it, between 10 and 500."""
+    return min(500, max(steps // 20, 10))
+
+
+# ---- CPU budgets --------------------------------------------------------------------------------------
+def time_training_step(data: str | Path, policy_config: PolicyConfig, batch_size: int, *, warmup: int = 3,
+                       steps: int = 8, seed: int = 0, augment: AugmentConfig | dict | None = None) -> float:
+    """CPU seconds per optimisation step of `policy_config` on `data` at this batch size, measured here and now.
+
+    A throwaway model does `warmup` + `steps` steps as the Trainer does them (batch assembly, the point subset,
+    augmentation, forward, backward, fused AdamW) and the median of the process CPU time per step is returned:
+    what a CPU-time budget buys, nearly independent of other jobs on the machine. The caller's torch RNG is left
+    as it was. Run it with the threads the training will use.
+    """
+    from torch.utils.data import default_collate
+
+    dataset = SequenceDataset(data, obs_keys=policy_config.obs_keys, n_obs_steps=policy_config.n_obs_steps,
+                              horizon=policy_config.horizon, n_action_steps=policy_config.n_action_steps,
+                              time_stride=policy_config.time_stride)
+    key = policy_config.visual_key
+    points = policy_config.observation.cloud_points(policy_config)  # None: not a cloud (an image)
+    augment = as_augment_config(augment)
+    rng = np.random.default_rng(seed)
+    generator = torch.Generator().manual_seed(seed)
+    times = []
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        policy = DiffusionPolicy(policy_config)
+        policy.fit_normalizer(dataset)
+        optimizer = torch.optim.AdamW(policy.parameters(), lr=1e-4, fused=True)
+        for index in range(warmup + steps):
+            started = time.process_time()
+            batch = default_collate([dataset[int(i)] for i in rng.integers(0, len(dataset), batch_size)])
+            clouds = batch["obs"][key]
+            if points is not None and points < clouds.shape[-2]:  # Trainer._subsample
+                keep = torch.randperm(clouds.shape[-2], generator=generator)[:points]
+                batch = {**batch, "obs": {**batch["obs"], key: clouds.index_select(-2, keep)}}
+            if augment is not None:
+                batch = augment_batch(batch, key if points is not None else None, augment, generator)
+            loss = policy.compute_loss(batch, generator=generator)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            if index >= warmup:
+                times.append(time.process_time() - started)
+    return float(np.median(times))
+
+
+def plan_budget(data: str | Path, policy_config: PolicyConfig, batch_size: int, cpu_minutes: float, *,
+                step_cap: int | None = None, threads: int | None = None, seed: int = 0,
+                augment: AugmentConfig | dict | None = None, min_steps: int = 50, max_steps: int = 50_000,
+                probe=None) -> BudgetPlan:
+    """The steps a CPU budget buys, from a short timing probe of this run's step (`time_training_step`).
+
+    The one planning rule of `lano3dp train --minutes` and `pipeline.train_stage`: steps = budget /
+    (probed CPU-s per step x TRAINING_OVERHEAD), kept within [min_steps, max_steps], and lowered to `step_cap`
+    when one is given. The learning-rate schedule then decays over the planned steps; the Trainer still stops at
+    the budget if steps turn out dearer than probed (`training_progress`).
+
+    Args:
+        threads: torch intra-op threads, set here before the probe (None: leave torch's setting).
+        probe: (data, policy_config, batch_size, seed=, augment=) -> CPU-s per step (None: time_training_step).
+    """
+    if not cpu_minutes > 0:
+        raise ValueError(f"the CPU budget must be > 0 minutes, got {cpu_minutes}")
+    if step_cap is not None and step_cap < 1:
+        raise ValueError(f"the step cap must be >= 1, got {step_cap}")
+    if threads:
+        torch.set_num_threads(threads)
+    seconds = float((probe or time_training_step)(data, policy_config, batch_size, seed=seed, augment=augment))
+    if not (math.isfinite(seconds) and seconds > 0):
+        raise ValueError(f"the timing probe measured {seconds} CPU-s per step; cannot plan a budget from it")
+    budget_steps = int(min(max(cpu_minutes * 60 / (seconds * TRAINING_OVERHEAD), min_steps), max_steps))
+    steps = budget_steps if step_cap is None else min(budget_steps, step_cap)
+    return BudgetPlan(cpu_minutes=cpu_minutes, probe_cpu_s_per_step=round(seconds, 5), overhead=TRAINING_OVERHEAD,
+                      budget_steps=budget_steps, step_cap=step_cap, steps=steps, threads=torch.get_num_threads())
+
+
+def saved_train_config(run: str | Path) -> dict[str, Any] | None:
+    """The train_config.json of the run in `run` as saved (None: no run there yet)."""
+    path = Path(run) / "train_config.json"
+    if not path.exists():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as error:
+        raise CorruptFileError(path, f"not valid JSON ({error})") from error
+
+
+class RunSchedule(NamedTuple):
+    """A run's step count, its warm-up, and the budget plan they came from (None: the steps were given)."""
+
+    steps: int
+    warmup_steps: int
+    budget_plan: BudgetPlan | None
+
+
+def run_schedule(run: str | Path, data: str | Path, policy_config: PolicyConfig, batch_size: int, *,
+                 cpu_minutes: float | None = None, steps: int | None = None, warmup_steps: int | None = None,
+                 **probe_options) -> RunSchedule:
+    """The steps and warm-up of `lano3dp train` into `run`.
+
+    With `cpu_minutes` the steps are planned from the budget (`plan_budget`, `steps` a cap), unless the run in
+    `run` was started with this budget and cap: a resumed run keeps its plan. Without, `steps` (default 3000).
+    The warm-up, when not given, is the resumed run's own or `default_warmup_steps` of the steps.
+    `probe_options` (threads, seed, augment, ...) go to `plan_budget`.
+    """
+    saved = saved_train_config(run) or {}
+    plan = None
+    if cpu_minutes is not None:
+        previous = saved.get("budget_plan")
+        if previous and previous["cpu_minutes"] == cpu_minutes and previous["step_cap"] == steps:
+            plan = BudgetPlan(**previous)
+        else:
+            plan = plan_budget(data, policy_config, batch_size, cpu_minutes, step_cap=steps, **probe_options)
+    total = plan.steps if plan is not None else steps or DEFAULT_STEPS
+    if warmup_steps is None:
+        warmup_steps = saved.get("warmup_steps", default_warmup_steps(total))
+    return RunSchedule(total, warmup_steps, plan)
+
+
 def _noise_seed(seed: int, rank: int, step: int) -> int:
-    return int(np.random.SeedSequence([seed, rank, step]).generate_state(1, dtype=np.uint64)[0] >> 1)
+    # shifted as a Python int: numpy 1.x cannot shift a uint64 by a Python int (same value on numpy 2)
+    return int(np.random.SeedSequence([seed, rank, step]).generate_state(1, dtype=np.uint64)[0]) >> 1
 
 
 class Trainer:
@@ -309,6 +482,8 @@ class Trainer:
 
     def _setup(self) -> None:
         config = self.config
+        if self.distributed and config.budget_plan is not None:
+            self._agree_on_planned_steps()
         if self.is_main:
             self.checkpoints.mkdir(parents=True, exist_ok=True)
             remove_stale_temporaries(self.checkpoints)
@@ -340,6 +515,10 @@ class Trainer:
             self.policy = DiffusionPolicy(policy_config).to(self.device)
         if state is None:
             self.policy.fit_normalizer(self.train_set)
+            if config.augment is not None and (config.augment.lift > 0 or config.augment.stretch > 0):
+                # lifted or stretched windows reach beyond the data
+                self.policy.normalizer.set_stats(widened_stats(self.policy.normalizer_stats(), config.augment,
+                                                               self._moved_key()))
         else:
             self._load_weights(self.policy, state.model, state.path)
         self.optimizer = torch.optim.AdamW(self.policy.parameters(), lr=config.lr, betas=config.betas,
@@ -409,7 +588,6 @@ class Trainer:
             saved = json.loads(saved_path.read_text())
         except (ValueError, UnicodeDecodeError) as error:
             raise CorruptFileError(saved_path, f"not valid JSON ({error})") from error
-        saved = {**FIELDS_BEFORE, **saved}
         new = self.config.to_dict()
         for config in (saved, new):  # the same dataset under another spelling of its path is the same dataset
             if config.get("data"):
@@ -434,6 +612,15 @@ class Trainer:
         if missing:
             raise TrainingConfigError(f"{store.path} has no {missing} (keys: {store.keys}); a "
                                       f"{policy_config.obs_type!r} policy needs {[*policy_config.obs_keys, 'action']}")
+        for key, length in policy_config.task_inputs.items():
+            stored = _step_shapes(store)[key]
+            if stored != (length,):
+                raise TrainingConfigError(f"{store.path} holds {key} of shape {stored} per step, the policy takes "
+                                          f"({length},)")
+        if policy_config.task_inputs and self.config.augment is not None:
+            raise TrainingConfigError(f"--augment moves the scene but not the task inputs "
+                                      f"{sorted(policy_config.task_inputs)} (obs[key] is not known to be a position); "
+                                      "train without --augment")
         observation = policy_config.observation
         if observation.object_slots:
             names = store.attrs.get("object_names")
@@ -575,6 +762,16 @@ class Trainer:
                 dist.destroy_process_group()
         return last_checkpoint
 
+    def _agree_on_planned_steps(self) -> None:
+        """Under torchrun each rank probed its own step cost: all take the fewest planned steps, so they stop at
+        the same step with the same schedule."""
+        import torch.distributed as dist
+
+        steps = torch.tensor([self.config.steps], dtype=torch.int64, device=self.device)
+        dist.all_reduce(steps, op=dist.ReduceOp.MIN)
+        self.config.steps = int(steps.item())
+        self.config.budget_plan = dataclasses.replace(self.config.budget_plan, steps=self.config.steps)
+
     def _agree_on_budget(self) -> None:
         """Every rank takes the largest CPU time of any rank: they then stop at the same step and, since the
         learning rate follows the budget, step with the same rate."""
@@ -641,7 +838,7 @@ class Trainer:
             return _NullWriter()
         from torch.utils.tensorboard import SummaryWriter
 
-        (self.out / "train_config.json").write_text(self.config.to_json() + "\n")
+        write_text_atomic(self.out / "train_config.json", self.config.to_json() + "\n")  # a full disk: never empty
         return SummaryWriter(str(self.out / "tensorboard"), purge_step=self.step or None)
 
     def _progress(self):

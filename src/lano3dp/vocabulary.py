@@ -8,6 +8,7 @@ means. Pure Python with no lano3dp imports, so it sits in the bottom layer (test
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -24,6 +25,22 @@ SIZE_WORDS = {
     "tall": "tall", "short": "short",
 }  # fmt: skip
 _COLOUR_ALIASES = {"gray": "grey", "golden": "gold"}
+# Nouns of things found on a table, beyond the skills' own words. Language counts each one said as an object
+# mention (which a plan must act on or avoid, with or without "the" before it), and the spelling corrector
+# never "corrects" one into a skill's word ("vase" is not a typo of "base", nor "fish" of "dish").
+OBJECT_NOUNS = frozenset(
+    """mug cup teacup glass tumbler vase lamp kettle teapot jar can tin box carton crate case book notebook pen
+    pencil marker plate saucer tray platter knife fork spoon spatula ladle whisk scissors tongs candle candlestick
+    toaster blender mixer jug pitcher carafe decanter thermos canister container tub bucket pail basket bag pouch
+    wallet purse key keys remote controller mouse keyboard laptop tablet monitor screen cable cord wire plug clock
+    watch radio speaker headphones camera glasses ruler stapler tape folder paper napkin towel cloth rag sponge
+    soap dispenser shaker grinder mill board tongs egg apple banana lemon lime pear peach fruit bread sandwich
+    cookie cake toy ball cube block doll figurine statue ornament sculpture photo picture frame cactus succulent
+    fan heater cushion pillow hat shoe umbrella helmet glove bin trashcan cylinder cone sphere pyramid brick
+    battery lighter matches coaster bell hammer screwdriver wrench drill pliers nail screw bolt
+    obstacle obstacles pot pan bowl dish bottle flask drawer microwave oven phone base dock charger plant flower
+    broom brush dustpan sprinkler tumbler goblet chalice beaker vial tube toothbrush comb mirror ashtray""".split()
+)
 _STOPWORDS = frozenset("the a an this that these those some my our your its of one".split())
 _TOKEN = re.compile(r"[a-z0-9]+")
 
@@ -31,6 +48,7 @@ _TOKEN = re.compile(r"[a-z0-9]+")
 _PLURAL_ONLY = frozenset("scissors tongs pliers tweezers shears binoculars headphones".split())
 
 
+@functools.lru_cache(maxsize=8192)
 def singular(word: str) -> str:
     """Crude English singular for object nouns ("bowls" -> "bowl", "boxes" -> "box", "glasses" -> "glass")."""
     if word in _PLURAL_ONLY:

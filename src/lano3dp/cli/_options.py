@@ -2,48 +2,81 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Annotated
 
 import typer
 
-from lano3dp.evaluate import PerceptionSettings
-from lano3dp.guidance.settings import (
-    BODY_MODELS,
-    GUIDANCE_MODES,
-    GUIDANCE_PRESETS,
-    PUSH_WEIGHTS,
-    TUNABLE_FIELDS,
-    GuidanceSettings,
-    ObstacleSettings,
-)
-
-SCHEDULERS = ("ddpm", "ddim")
+from lano3dp.guidance.settings import SCHEDULERS  # noqa: F401 (the guidance-figures command's choices)
 
 
-def output_path(path: Path | None, option: str = "--out", *, folder: bool) -> Path | None:
+def output_path(path: Path | None, option: str = "--out", *, folder: bool, kind: str | None = None) -> Path | None:
     """`path` can be written: no regular file on the way to it, a file where a file is wanted and a folder
-    where a folder is (an existing one is fine: commands resume into it), and a writable nearest folder."""
-    import os
+    where a folder is (an existing one is fine: commands resume into it), and a nearest existing folder that
+    takes a new file (tried, so a read-only mount, a permission or an ACL is found now, not when the first
+    result is written). Symlinks are followed: what counts is the folder written into.
+
+    No folder is written inside a dataset (a zarr store); with `kind` ("dataset" for collect, "run" for train),
+    none inside a training run or a policy checkpoint either, and an existing folder must be of that kind (a
+    dataset is not resumed as a run, nor a folder of other files made into a dataset).
+    """
+    import tempfile
 
     if path is None:
         return None
     absolute = Path(path).absolute()
-    if absolute.exists():
-        if folder and not absolute.is_dir():
-            raise typer.BadParameter(f"{path} is a file; give a folder", param_hint=option)
-        if not folder and absolute.is_dir():
-            raise typer.BadParameter(f"{path} is a folder; give a file name", param_hint=option)
-    for ancestor in absolute.parents:
+    real = absolute.resolve()  # through symlinks, so a folder reached by a link is judged where it is
+    shown = f"{path}" if real == absolute else f"{path} (= {real})"
+    if real.exists():
+        if folder and not real.is_dir():
+            raise typer.BadParameter(f"{shown} is a file; give a folder", param_hint=option)
+        if not folder and real.is_dir():
+            raise typer.BadParameter(f"{shown} is a folder; give a file name", param_hint=option)
+        if folder and kind is not None:
+            _check_existing_kind(real, shown, kind, option)
+    for ancestor in real.parents:
+        if folder and _is_dataset(ancestor):
+            raise typer.BadParameter(f"{shown} is inside the dataset {ancestor}; give a folder outside it",
+                                     param_hint=option)
+        if folder and kind is not None and (found := _run_or_checkpoint(ancestor)):
+            raise typer.BadParameter(f"{shown} is inside the {found} {ancestor}; give a folder outside it",
+                                     param_hint=option)
+    # an existing output folder is written into (a resumed run, a dataset added to): it must take files itself
+    for ancestor in ([real] if folder else []) + list(real.parents):
         if ancestor.exists():
             if not ancestor.is_dir():
                 raise typer.BadParameter(f"cannot write {path}: {ancestor} is a file, not a folder", param_hint=option)
-            if not os.access(ancestor, os.W_OK):
-                raise typer.BadParameter(f"cannot write {path}: {ancestor} is not writable", param_hint=option)
+            try:
+                with tempfile.TemporaryFile(dir=ancestor):
+                    pass
+            except OSError as error:
+                raise typer.BadParameter(f"cannot write {path}: {ancestor} does not take new files "
+                                         f"({error.strerror or error})", param_hint=option) from None
             break
     return path
+
+
+def _is_dataset(folder: Path) -> bool:
+    return (folder / "zarr.json").is_file() or (folder / ".zgroup").is_file()
+
+
+def _run_or_checkpoint(folder: Path) -> str | None:
+    if (folder / "train_config.json").is_file() or (folder / "checkpoints" / "last").exists():
+        return "training run"
+    if (folder / "config.json").is_file() and (folder / "model.safetensors").is_file():
+        return "policy checkpoint"
+    return None
+
+
+def _check_existing_kind(folder: Path, shown: str, kind: str, option: str) -> None:
+    """An existing output folder of `kind` ("dataset" or "run") is resumed; one of another kind is refused."""
+    other = "dataset" if _is_dataset(folder) else _run_or_checkpoint(folder)
+    if kind == "dataset" and other != "dataset" and (other or any(folder.iterdir())):
+        raise typer.BadParameter(f"{shown} is {'a ' + other if other else 'a folder of other files'}, not a "
+                                 "dataset; give a new folder (or an existing dataset to add to)", param_hint=option)
+    if kind == "run" and other in ("dataset", "policy checkpoint"):
+        raise typer.BadParameter(f"{shown} is a {other}, not a training run; give a new folder (or an existing "
+                                 "run to resume)", param_hint=option)
 
 
 def existing_path(path: Path | None, option: str) -> Path | None:
@@ -94,45 +127,6 @@ def device(value: str, option: str = "--device") -> str:
     return value
 
 
-SEGMENTERS = ("sim", "open-vocab")
-DETECTORS = ("grounding_dino", "owlv2")
-SEGMENTER_HELP = "Perception: sim (the simulator's ground-truth masks) | open-vocab (detector + SAM, the paper's)."
-DETECTOR_DIR_HELP = "open-vocab: local folder of the detector's weights (never downloaded)."
-SAM_DIR_HELP = "open-vocab: local folder of SAM's weights (never downloaded)."
-
-
-def segmenter(kind: str, detector: str, detector_dir: Path | None, sam_dir: Path | None) -> None:
-    """--segmenter and its weight folders, checked before any episode runs."""
-    choice(kind, SEGMENTERS, "--segmenter")
-    choice(detector, DETECTORS, "--detector")
-    existing_path(detector_dir, "--detector-dir")
-    existing_path(sam_dir, "--sam-dir")
-    if kind == "open-vocab":
-        missing = [name for name, path in (("--detector-dir", detector_dir), ("--sam-dir", sam_dir)) if path is None]
-        if missing:
-            raise typer.BadParameter(f"open-vocab needs local weight folders: give {' and '.join(missing)}",
-                                     param_hint="--segmenter")
-
-
-def obstacle_shape_help() -> str:
-    """--obstacle-shape's help: the names registered when the command line is imported (torch-free)."""
-    from lano3dp.guidance.shapes import obstacle_shape_names
-
-    return (f"Shape fitted to each obstacle's points: {' | '.join(obstacle_shape_names())} (cylinder: the paper's); "
-            "more with lano3dp.guidance.register_obstacle_shape, e.g. in the --env module.")
-
-
-def obstacle_shape(name: str, option: str = "--obstacle-shape") -> str:
-    """A registered shape; checked after --env is imported, since that module may register one."""
-    from lano3dp.guidance.shapes import UnknownObstacleShapeError, get_obstacle_shape
-
-    try:
-        get_obstacle_shape(name)
-    except UnknownObstacleShapeError as error:
-        raise typer.BadParameter(str(error), param_hint=option) from None
-    return name
-
-
 def obs_type(name: str, option: str = "--obs-type") -> str:
     """A registered observation type (`lano3dp.policy.observations`), as a usage error naming the registered ones."""
     from lano3dp.policy.observations import UnknownObservationTypeError, get_observation_type
@@ -161,154 +155,88 @@ def env_factory(spec: str | None, option: str = "--env") -> str | None:
     return spec
 
 
-# ---- the settings `eval` and `run` share: one declaration each, mapped onto EvalConfig/RunConfig's sections ----
-def _preset_values(name: str) -> str:
-    """What each guidance preset sets `name` to, for --help: 'recommended 0.04, paper 4'."""
-    def text(value) -> str:
-        if isinstance(value, bool):
-            return "on" if value else "off"
-        if value is None:
-            return "none"
-        return f"{value:g}" if isinstance(value, float | int) else str(value)
+# ---- the settings `eval` and `run` share: a config file, basic options, `--set` for every other field ----------
+PRESET_HELP = ("Guidance: none | a_k | paper | recommended | tuned (the policy's own, else recommended); "
+               "`lano3dp settings` shows them.")
+SET_HELP = (r"Change any setting by its dotted path, e.g. guidance.sampler.rho=0.02, "
+            r"guidance.execution.filters=\[repair,hold], max_steps=200 (repeatable; after --config and options).")
+CONFIG_HELP = "A YAML or JSON file of settings (a results JSON re-runs what made it); options and --set override it."
+OVERWRITE_HELP = "Replace what --out already holds (never done without it)."
+SEGMENTERS = ("sim", "error-model", "open-vocab")
+DETECTORS = ("grounding_dino", "owlv2")
+SEGMENTER_HELP = ("sim (the simulator's ground-truth masks) | error-model (those masks through a published-numbers "
+                  "model of detector, SAM and tracker errors) | open-vocab (detector + SAM, the paper's).")
+DETECTOR_DIR_HELP = "open-vocab: local folder of the detector's weights (never downloaded)."
+SAM_DIR_HELP = "open-vocab: local folder of SAM's weights (never downloaded)."
+PANEL_SETTINGS, PANEL_PERCEPTION, PANEL_ADVANCED = "Settings", "Perception", "Advanced"
 
-    return ", ".join(f"{preset} {text(getattr(settings, name))}" for preset, settings in GUIDANCE_PRESETS.items())
-
-
-# Guidance options default to None: the value of --guidance-preset, which a given option overrides.
-GUIDANCE_PRESET = typer.Option(
-    "recommended", "--guidance-preset",
-    help="Settings of guided episodes, each overridable by its option below: recommended (A_0|k on every DDIM step, "
-         "metric push, path densified) | paper (S = 10, push in normalised units, waypoints only; with --scheduler "
-         "ddpm --steps 100 --body sphere, the paper's whole form).")
-RHO = typer.Option(None, "--rho", help="Guidance scale rho: metres per guided step with --metric-push, else "
-                                       f"normalised units (default: the preset's: {_preset_values('rho')}).")
-LAST_STEPS = typer.Option(None, "--last-steps", min=0, help="S: guide while the training-scale step k <= S (100: "
-                                                            f"all; default: {_preset_values('last_steps')}).")
-METRIC_PUSH = typer.Option(None, "--metric-push/--paper-push",
-                           help="Push isotropically in metres, or as the paper in normalised action units (which "
-                                f"needs a far larger rho; default: {_preset_values('metric_gradient')}).")
-PER_TRAIN_STEP = typer.Option(None, "--per-train-step/--no-per-train-step",
-                              help="Scale rho by the scheduler stride (DDIM pushes as much as DDPM; default: "
-                                   f"{_preset_values('per_train_step')}).")
-DENSIFY = typer.Option(None, "--densify", min=1, help="Points per path segment the cost sees (1: waypoints only, as "
-                                                      f"the paper; default: {_preset_values('densify')}).")
-GUIDED_CLIP_RANGE = typer.Option(None, "--guided-clip-range",
-                                 help="Guided steps clip x_0 to [-r, r] (normalised units) instead of the "
-                                      "scheduler's [-1, 1], so a detour outside the demonstrations' range is not "
-                                      f"undone (default: {_preset_values('guided_clip_range')}, the scheduler's).")
-PUSH_WEIGHT = typer.Option(None, "--push-weight",
-                           help="constant (the paper: every guided step pushes rho * grad) | alpha_bar (each push "
-                                "times sqrt(abar_k abar_k-1), for DDIM guided on every step; default: "
-                                f"{_preset_values('push_weight')}).")
-CHECKED = typer.Option(None, "--checked/--no-checked", help="Checked execution: re-sample with larger rho while a "
-                                                            f"chunk collides (default: {_preset_values('checked')}).")
-GUIDE_WHEN_NEEDED = typer.Option(None, "--guide-when-needed/--no-guide-when-needed",
-                                 help="Guide a chunk only when the policy's own one comes within the margin of an "
-                                      f"obstacle (default: {_preset_values('guide_when_needed')}).")
-ANCHORED = typer.Option(None, "--anchored/--no-anchored",
-                        help="Cost the path from the hand's present position, so the step to the first action is "
-                             f"pushed clear too (default: {_preset_values('anchored')}).")
-REPAIR_STEPS = typer.Option(None, "--repair-steps", min=0,
-                            help="After a guided sample, at most this many 1 cm steps of plain cost descent until "
-                                 "the path the arm will take through the chunk clears by the margin (0: off; "
-                                 f"default: {_preset_values('repair_steps')}).")
-PUSH_TURN = typer.Option(None, "--push-turn", min=0.0, max=89.9,
-                         help="Degrees to turn each obstacle's push round it, towards the side the chunk already "
-                              "passes, so a chunk headed straight at it goes round rather than back (0: straight "
-                              f"away; needs --anchored; default: {_preset_values('push_turn')}).")
-BRIDGE_GAPS = typer.Option(None, "--bridge-gaps/--no-bridge-gaps",
-                           help="Guide against a wall across every gap between two obstacles too narrow for the "
-                                "hand too, so the path goes round the pair instead of stalling at the gap "
-                                f"(default: {_preset_values('bridge_gaps')}).")
-ESCAPE_INSIDE = typer.Option(None, "--escape-inside/--no-escape-inside",
-                             help="With --hold-unclear, a hand already closer to an obstacle than the hold keeps (a "
-                                  "moving obstacle came at it) moves where it gets no closer, or straight out, "
-                                  f"instead of holding still (default: {_preset_values('escape_when_inside')}).")
-FOLLOW_OBSTACLES = typer.Option(None, "--follow-obstacles/--no-follow-obstacles",
-                                help="With --hold-unclear, a hand held still for several chunks in a row follows "
-                                     "the nearest obstacle's boundary until its chunks run again with a clear way "
-                                     f"on (default: {_preset_values('follow_when_stuck')}).")
-TUNED = typer.Option(None, "--checkpoint-guidance/--no-checkpoint-guidance",
-                     help="Take the guidance the checkpoint was tuned with (its guidance.json) for every guidance "
-                          "option not given here, or keep the preset's (default: "
-                          f"{_preset_values('tuned')}).")
-HOLD_UNCLEAR = typer.Option(None, "--hold-unclear/--no-hold-unclear",
-                            help="Execute only the start of a guided chunk predicted to keep half the margin, "
-                                 "holding still when none does, and re-plan (default: "
-                                 f"{_preset_values('hold_unclear')}).")
-OBSTACLE_SHAPE = typer.Option(ObstacleSettings.shape, "--obstacle-shape", metavar="NAME", help=obstacle_shape_help())
-MARGIN = typer.Option(ObstacleSettings.margin, "--margin", min=0.0,
-                      help="Safety margin (m) beyond contact, part of Q*.")
-BODY = typer.Option(ObstacleSettings.body, "--body", help="What guidance keeps clear: swept (hand + held object, "
-                                                          "re-measured every chunk) | sphere (the paper: one ball "
-                                                          "round the EE point).")
-HELD_RADIUS = typer.Option(None, "--held-radius", min=0.0, help="--body sphere: its radius (m) in Q*; default: "
-                                                                "measured from the held object's cloud.")
-REFIT_OBSTACLES = typer.Option(ObstacleSettings.refit, "--refit-obstacles/--no-refit-obstacles",
-                               help="Re-fit obstacles before every chunk (moving obstacles).")
-SEGMENTER = typer.Option(PerceptionSettings.segmenter, "--segmenter", help=SEGMENTER_HELP)
-DETECTOR = typer.Option(PerceptionSettings.detector, "--detector", help="open-vocab: grounding_dino | owlv2.")
-DETECTOR_DIR = typer.Option(None, "--detector-dir", help=DETECTOR_DIR_HELP)
-SAM_DIR = typer.Option(None, "--sam-dir", help=SAM_DIR_HELP)
-IMAGE_SIZE = typer.Option(None, "--image-size", min=16, help="Camera resolution (default: that of the dataset the "
-                                                             "checkpoint was trained on).")
+# The settings and perception options `eval` and `run` share, declared once (typer's Annotated form).
+SetOption = Annotated[list[str] | None, typer.Option("--set", metavar="PATH=VALUE", help=SET_HELP,
+                                                     rich_help_panel=PANEL_SETTINGS)]
+ConfigOption = Annotated[Path | None, typer.Option("--config", metavar="FILE", help=CONFIG_HELP,
+                                                   rich_help_panel=PANEL_SETTINGS)]
+SegmenterOption = Annotated[str, typer.Option(help=SEGMENTER_HELP, rich_help_panel=PANEL_PERCEPTION)]
+DetectorOption = Annotated[str, typer.Option(help="open-vocab: grounding_dino | owlv2.",
+                                             rich_help_panel=PANEL_PERCEPTION)]
+DetectorDirOption = Annotated[Path | None, typer.Option(help=DETECTOR_DIR_HELP, rich_help_panel=PANEL_PERCEPTION)]
+SamDirOption = Annotated[Path | None, typer.Option(help=SAM_DIR_HELP, rich_help_panel=PANEL_PERCEPTION)]
+ImageSizeOption = Annotated[int | None, typer.Option(help="Camera resolution (default: that of the checkpoint's "
+                                                          "data).", rich_help_panel=PANEL_PERCEPTION)]
 
 
-def guidance_settings(mode: str, preset: str, **overrides) -> GuidanceSettings:
-    """--guidance and --guidance-preset, with the guidance options that were given (not None) overriding it and
-    kept over the checkpoint's tuning."""
-    choice(mode, GUIDANCE_MODES, "--guidance")
-    choice(preset, tuple(GUIDANCE_PRESETS), "--guidance-preset")
-    choice(overrides.get("push_weight"), PUSH_WEIGHTS, "--push-weight")
-    given = {name: value for name, value in overrides.items() if value is not None}
+def settings_options(ctx, fields: dict[str, str]) -> dict:
+    """The config dict a command line gives: `--config` first, then each option given on the command line (its
+    parameter -> dotted config path in `fields`; an option left out keeps the file's value or the config class's
+    default, which the option's default states), then `--set`; checked by the config class afterwards."""
+    from lano3dp.config_tree import SettingsError
+    from lano3dp.evaluation.config import load_config_file, with_assignments
+
+    params = ctx.params
     try:
-        return replace(GUIDANCE_PRESETS[preset], mode=mode, **given,
-                       keep=tuple(name for name in given if name in TUNABLE_FIELDS))
-    except ValueError as error:
-        raise typer.BadParameter(str(error), param_hint="--guidance") from None
+        data = load_config_file(params["config"]) if params.get("config") else {}
+        for name, path in fields.items():
+            value = params[name]
+            # by name: typer's click and the installed click each have a ParameterSource enum; a repeatable option
+            # left out arrives empty, whatever its source says
+            source = getattr(ctx.get_parameter_source(name), "name", None)
+            if source in (None, "DEFAULT", "DEFAULT_MAP") or value in ([], ()):
+                continue
+            node, keys = data, path.split(".")
+            for key in keys[:-1]:
+                node = node.setdefault(key, {})
+            node[keys[-1]] = str(value) if isinstance(value, Path) else list(value) if isinstance(value, tuple) \
+                else value
+        data = with_assignments(data, params.get("set_") or ())
+        if "guidance" in data and "preset" not in data["guidance"]:  # the command's default preset, not the class's
+            data["guidance"]["preset"] = params["guidance_preset"]
+        return data
+    except SettingsError as error:
+        raise typer.BadParameter(str(error), param_hint="--config / --set") from None
 
 
-def obstacle_settings(shape: str, margin: float, body: str, held_radius: float | None,
-                      refit: bool) -> ObstacleSettings:
-    """The obstacle options; the shape is checked here, so call it after --env is imported (it may register one)."""
-    choice(body, BODY_MODELS, "--body")
-    obstacle_shape(shape)
-    if held_radius is not None and body != "sphere":
-        raise typer.BadParameter("a fixed held radius sizes the sphere body model; add --body sphere",
-                                 param_hint="--held-radius")
-    return ObstacleSettings(shape=shape, margin=margin, body=body, held_radius=held_radius, refit=refit)
+def build_config(cls, data: dict):
+    """`cls` (EvalConfig or RunConfig) from a config dict, each problem one usage error naming the setting."""
+    from lano3dp.config_tree import SettingsError, from_dict
+
+    try:
+        return from_dict(cls, data)
+    except SettingsError as error:
+        raise typer.BadParameter(str(error), param_hint="settings") from None
 
 
-def perception_settings(kind: str, detector: str, detector_dir: Path | None, sam_dir: Path | None,
-                        image_size: int | None) -> PerceptionSettings:
-    segmenter(kind, detector, detector_dir, sam_dir)
-    return PerceptionSettings(segmenter=kind, detector=detector, detector_dir=detector_dir, sam_dir=sam_dir,
-                              image_size=image_size)
+def run_folder(out: Path | None, command: str, *, overwrite: bool, marker: str) -> Path:
+    """Where a command writes: `out`, or a new `outputs/<command>/<date>_<time>/` (a suffix when two start in one
+    second). An existing `out` that holds `marker` (a finished result) is refused unless `overwrite`."""
+    from datetime import datetime
 
-
-# GuidanceSettings field -> the parameter of `eval` and `run` that overrides it
-GUIDANCE_OVERRIDES = {"rho": "rho", "last_steps": "last_steps", "metric_gradient": "metric_push",
-                      "per_train_step": "per_train_step", "densify": "densify",
-                      "guided_clip_range": "guided_clip_range", "push_weight": "push_weight", "checked": "checked",
-                      "guide_when_needed": "guide_when_needed", "anchored": "anchored",
-                      "repair_steps": "repair_steps", "hold_unclear": "hold_unclear",
-                      "push_turn": "push_turn", "bridge_gaps": "bridge_gaps", "escape_when_inside": "escape_inside",
-                      "follow_when_stuck": "follow_obstacles", "tuned": "checkpoint_guidance"}
-
-
-def episode_settings(params: Mapping[str, Any]) -> tuple[GuidanceSettings, ObstacleSettings, PerceptionSettings]:
-    """The options `eval` and `run` share, from their parsed parameters (`ctx.params`), checked: --env first (it
-    may register an obstacle shape), then the task and variation when the simulator is used, then the guidance,
-    scheduler, obstacle and perception options, built into their settings sections."""
-    env_factory(params["env"])
-    if params["env"] is None:  # a user's env has its own task names and variations
-        task_name(params["task"])
-        variation(params["variation"])
-    guidance = guidance_settings(params["guidance"], params["guidance_preset"],
-                                 **{name: params[option] for name, option in GUIDANCE_OVERRIDES.items()})
-    choice(params["scheduler"], SCHEDULERS, "--scheduler")
-    obstacle = obstacle_settings(params["obstacle_shape"], params["margin"], params["body"], params["held_radius"],
-                                 params["refit_obstacles"])
-    perception = perception_settings(params["segmenter"], params["detector"], params["detector_dir"],
-                                     params["sam_dir"], params["image_size"])
-    return guidance, obstacle, perception
+    if out is None:
+        base = Path("outputs") / command / datetime.now().strftime("%Y-%m-%d_%H-%M-%S")
+        out, number = base, 1
+        while out.exists():
+            number += 1
+            out = base.with_name(f"{base.name}_{number}")
+        return out
+    if (Path(out) / marker).exists() and not overwrite:
+        raise typer.BadParameter(f"{out} already holds a finished {command} ({marker}); pass --overwrite to replace "
+                                 "it, or another --out", param_hint="--out")
+    return Path(out)

@@ -71,7 +71,7 @@ def collect_command(
     from lano3dp.cli import _options
     from lano3dp.collect import collect, collect_from_env
 
-    _options.output_path(out, folder=True)
+    _options.output_path(out, folder=True, kind="dataset")
     if env is None:
         if task is None:
             raise typer.BadParameter("give a task of the built-in simulator, or --env", param_hint="--task")
@@ -95,6 +95,9 @@ def collect_command(
                                   crop_low=_point(crop_low, "--crop-low"), crop_high=_point(crop_high, "--crop-high"))
     failed = f", {len(result.failed_seeds)} expert failures skipped (seeds {result.failed_seeds})" \
         if result.failed_seeds else ""
+    if result.unseen_seeds:
+        failed += (f", {len(result.unseen_seeds)} seeds skipped with an object out of view in the first frame "
+                   f"(seeds {result.unseen_seeds})")
     typer.echo(f"{result.path}: added {result.added} episodes ({result.steps} steps) in {result.seconds:.1f} s; "
                f"holds {result.total}{failed}")
 
@@ -124,12 +127,23 @@ def video_command(
 
 
 def tasks_command() -> None:
-    """List the simulated tasks with their skill, object slots and instruction."""
+    """List the simulated tasks: object slots (the policy's inputs, in order), the variation axes that change
+    their scenes (`--variation`), and their instruction."""
     from lano3dp.sim.tasks import TASKS
+    from lano3dp.sim.variations import OBSTACLE_KINDS, VARIATION_AXES
 
-    for name in sorted(TASKS):
-        cls = TASKS[name]
-        typer.echo(f"{name:20s} skill={cls.skill:10s} slots={','.join(cls.object_slots):24s} {cls.instruction}")
+    def axes(cls) -> str:  # "similar" adds look-alikes of the similar_slots: a task without any has no such scenes
+        return ",".join(a for a in VARIATION_AXES if a != "similar" or cls.similar_slots)
+
+    rows = [("task", "object slots", "variations", "instruction")]
+    rows += [(name, ",".join(TASKS[name].object_slots), axes(TASKS[name]), TASKS[name].instruction)
+             for name in sorted(TASKS)]
+    widths = [max(len(row[column]) for row in rows) for column in range(3)]
+    for row in rows:
+        typer.echo("  ".join([*(cell.ljust(width) for cell, width in zip(row[:3], widths, strict=True)), row[3]]))
+    kinds = ", ".join(f"obstacle:{kind}" for kind in OBSTACLE_KINDS)
+    typer.echo(f"\nclean (the default) is none of them; axes combine with '+' (clutter+camera); obstacle takes "
+               f"modifiers: a count (obstacle:2), a kind ({kinds}) and obstacle:moving.")
 
 
 def register(app: typer.Typer) -> None:

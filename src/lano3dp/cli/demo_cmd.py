@@ -18,7 +18,7 @@ from pathlib import Path
 
 import typer
 
-from lano3dp.cli._options import GUIDANCE_PRESET, LAST_STEPS, RHO
+from lano3dp.cli import _options
 from lano3dp.guidance.settings import SAFETY_MARGIN, GuidanceSettings
 
 
@@ -38,9 +38,11 @@ def demo_command(
                                             "sizes the LR schedule)."),
     steps: int = typer.Option(None, min=1, help="Train exactly this many steps instead of a time budget."),
     episodes: int = typer.Option(20, min=1, help="Evaluation episodes per condition."),
-    guidance_preset: str = GUIDANCE_PRESET,
-    rho: float = RHO,
-    last_steps: int = LAST_STEPS,
+    guidance_preset: str = typer.Option("recommended", "--guidance-preset", metavar="NAME",
+                                        help="Guidance of the guided condition: " + _options.PRESET_HELP),
+    set_: list[str] = typer.Option(None, "--set", metavar="PATH=VALUE",
+                                   help="Change a guidance setting of the guided condition, e.g. --set "
+                                        "guidance.sampler.rho=0.02 (repeatable)."),
     points: int = typer.Option(64, min=16, help="Points per object cloud (the policy default: a training step "
                                                 "costs a quarter of 128 points' with the rest of the recipe; "
                                                 "bench/bench_policy.py)."),
@@ -50,14 +52,21 @@ def demo_command(
     """Collect, train, evaluate with and without a novel obstacle and guidance, and write a report."""
     from rich.console import Console
 
-    from lano3dp.cli import _options
     from lano3dp.cli.eval_cmd import command_line
+    from lano3dp.evaluation import GuidanceChoice, with_assignments
 
     _options.task_name(task)
     _options.output_path(out, folder=True)
     if minutes <= 0:
         raise typer.BadParameter(f"must be > 0, got {minutes}", param_hint="--minutes")
-    guided = _options.guidance_settings("clean", guidance_preset, rho=rho, last_steps=last_steps)
+    data = with_assignments({"guidance": {"preset": guidance_preset}}, set_ or ())
+    if set(data) != {"guidance"}:
+        raise typer.BadParameter("the demo's --set changes guidance settings only (guidance.<section>.<field>)",
+                                 param_hint="--set")
+    guided = _options.build_config(GuidanceChoice, data["guidance"])
+    if guided.preset == "none":
+        raise typer.BadParameter("the demo compares guided with unguided episodes: name a guided preset",
+                                 param_hint="--guidance-preset")
     console = Console()
     report = run_demo(command=command_line(ctx), out=out, task=task, demos=demos, minutes=minutes, steps=steps,
                       episodes=episodes, guided=guided, points=points, workers=workers, seed=seed, console=console)
@@ -94,10 +103,10 @@ def training_warnings(train_config: dict, checkpoint: Path) -> list[str]:
 
 
 CONDITIONS = (
-    # name, variation, guidance
-    ("clean", "clean", "none"),
-    ("obstacle, no guidance", "obstacle", "none"),
-    ("obstacle, guidance", "obstacle", "clean"),
+    # name, variation, guided
+    ("clean", "clean", False),
+    ("obstacle, no guidance", "obstacle", False),
+    ("obstacle, guidance", "obstacle", True),
 )
 
 
@@ -110,12 +119,10 @@ def run_demo(*, out: Path, **options) -> Path:
 
 
 def _run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float, steps: int | None, episodes: int,
-              guided: GuidanceSettings, points: int, workers: int, seed: int, console) -> Path:
-    from dataclasses import replace
-
+              guided, points: int, workers: int, seed: int, console) -> Path:
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from lano3dp.evaluate import EvalConfig
+    from lano3dp.evaluation import EvalConfig, GuidanceChoice
     from lano3dp.jsonio import write_json
     from lano3dp.pipeline import collect_stage, eval_stage, train_stage
 
@@ -156,11 +163,12 @@ def _run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float,
         log("[yellow]" + warning.strip().replace("**", "") + "[/yellow]")
     log(f"3/4 evaluating {episodes} episodes per condition: " + "; ".join(c[0] for c in CONDITIONS))
     results = {}
-    for name, variation, guidance in CONDITIONS:
+    for name, variation, is_guided in CONDITIONS:
         slug = name.replace(", ", "_").replace(" ", "_")
+        # obstacle conditions run only scenes with room for the obstacle, so every such episode has one
         config = EvalConfig(checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
-                            guidance=replace(guided, mode=guidance),
-                            workers=workers,
+                            guidance=guided if is_guided else GuidanceChoice("none"),
+                            obstacle_scenes_only=variation == "obstacle", workers=workers,
                             video_dir=str(out / "videos" / slug) if variation == "obstacle" else None, n_videos=1,
                             out=str(out / "eval" / f"{slug}.json"))
         with Progress(TextColumn(f"  {name:<24}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
@@ -184,32 +192,31 @@ def _run_demo(*, command: str, out: Path, task: str, demos: int, minutes: float,
     timings.pop("total_this_run_s", None)  # (written by earlier versions) stage times are what add up
     write_json(timings_path, timings)
     report = write_demo_report(out, task=task, checkpoint=Path(checkpoint), results=results, timings=timings,
-                               command=command, guided=guided)
+                               command=command, guided=results["obstacle, guidance"]["guidance"])
     log(f"done in {time.perf_counter() - started:.0f} s")
     return report
 
 
 def describe_guidance(settings: GuidanceSettings) -> str:
     """The guided condition's settings in words, for the report."""
-    push = ("m per guided step, pushed isotropically in metres" if settings.metric_gradient
+    sampler, cost = settings.sampler, settings.cost
+    push = ("m per guided step, pushed isotropically in metres" if cost.metric_push
             else "pushed in normalised action units, as the paper")
-    words = [f"rho = {settings.rho:g} {push}", f"S = {settings.last_steps}",
-             "on the densified path" if settings.densify > 1 else "on the waypoints"]
-    if settings.anchored:
+    words = [f"rho = {sampler.rho:g} {push}", f"S = {sampler.last_steps}",
+             "on the densified path" if cost.densify > 1 else "on the waypoints"]
+    if cost.anchored:
         words.append("from the hand's present position")
-        if settings.push_turn:
-            words.append(f"the push turned {settings.push_turn:g} degrees round each obstacle")
-    if settings.repair_steps:
-        words.append(f"up to {settings.repair_steps} repair steps after sampling")
-    if settings.hold_unclear:
-        words.append("only the part of a chunk predicted clear executed")
-    if settings.checked:
-        words.append("checked execution")
+        if cost.push_turn:
+            words.append(f"the push turned {cost.push_turn:g} degrees round each obstacle")
+    if sampler.strategy != "always":
+        words.append(f"sampling strategy {sampler.strategy}")
+    if settings.execution.filters:
+        words.append(f"chunk filters {', '.join(settings.execution.filters)}")
     return ", ".join(words)
 
 
 def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, timings: dict, command: str,
-                      guided: GuidanceSettings) -> Path:
+                      guided: dict) -> Path:
     """report.md + rates.png + top_view.png from the evaluation results."""
     from safetensors import safe_open
 
@@ -242,10 +249,10 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
     plot_rates(out / "rates.png", [(name, r["summary"]) for name, r in results.items()],
                title=f"{task}: {store.n_episodes} demos, {steps_done} training steps")
 
-    # one paired scene (same seed) with and without guidance: prefer one where guidance changed the outcome
+    # one paired scene (same seed) with and without guidance: the first obstacle scene, a rule fixed before any
+    # outcome is seen
     unguided_runs, guided_runs = results["obstacle, no guidance"]["episodes"], results["obstacle, guidance"]["episodes"]
-    pairs = list(zip(unguided_runs, guided_runs, strict=True))
-    pick = next((p for p in pairs if p[0]["collided"] and not p[1]["collided"]), pairs[0])
+    pick = (unguided_runs[0], guided_runs[0])
     runs = [(f"no guidance (seed {pick[0]['seed']}): " + ("collided" if pick[0]["collided"] else "no contact"),
              pick[0]["ee_path"]),
             ("guidance A_0|k: " + ("collided" if pick[1]["collided"] else "no contact"), pick[1]["ee_path"])]
@@ -264,7 +271,8 @@ def write_demo_report(out: Path, *, task: str, checkpoint: Path, results: dict, 
         "A small Lan-o3dp policy (object clouds of the task's objects + robot state -> diffusion over EE actions) "
         f"trained on **{store.n_episodes} scripted demonstrations** of clean scenes, then run in closed loop on new "
         "scenes: clean ones, and ones with a **novel obstacle** on the expert's path (never seen in training), "
-        f"without and with the paper's cost guidance on A_0|k ({describe_guidance(guided)}; the obstacle is "
+        "without and with the paper's cost guidance on A_0|k "
+        f"({describe_guidance(GuidanceSettings.from_dict(guided))}; the obstacle is "
         "segmented and fitted with a vertical cylinder, which the hand and the carried object are kept "
         f"{100 * SAFETY_MARGIN:g} cm clear of).",
         "",

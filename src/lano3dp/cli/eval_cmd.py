@@ -13,96 +13,106 @@ def register(app: typer.Typer) -> None:
     app.command("eval")(eval_command)
 
 
+# option parameter -> its path in EvalConfig
+EVAL_FIELDS = {"checkpoint": "checkpoint", "task": "task", "variation": "variation", "episodes": "episodes",
+               "seed": "seed", "guidance_preset": "guidance.preset", "workers": "workers", "batch": "batch",
+               "env": "env",
+               "obstacles": "obstacles", "obstacle_scenes_only": "obstacle_scenes_only", "max_steps": "max_steps",
+               "success_at": "success_at", "video_dir": "video_dir", "n_videos": "n_videos", "rerun": "rerun_dir",
+               "segmenter": "perception.segmenter", "detector": "perception.detector",
+               "detector_dir": "perception.detector_dir", "sam_dir": "perception.sam_dir",
+               "image_size": "perception.image_size"}
+RESULTS_NAME = "results.json"
+
+
 def eval_command(
     ctx: typer.Context,
-    checkpoint: Path = typer.Option(None, "--checkpoint", "-c",
-                                    help="Policy folder or training run (its last checkpoint); default: the policy "
-                                         "packaged for --task."),
-    task: str = typer.Option(None, help="Task name (default: the task the checkpoint was trained on)."),
-    variation: str = typer.Option("clean", help="clean, or axes joined by '+': clutter, similar, instance, camera, "
-                                                "background, obstacle."),
-    episodes: int = typer.Option(20, min=1, help="Number of episodes (seeds seed, seed+1, ...)."),
-    obstacles: list[str] = typer.Option(None, "--obstacles", help="Object to avoid (repeatable). Default: every "
-                                                                  "object the scene marks as an obstacle."),
-    guidance: str = typer.Option("none", help="none | noisy (cost on A_k) | clean (the paper's A_0|k)."),
-    guidance_preset: str = _options.GUIDANCE_PRESET,
-    rho: float = _options.RHO,
-    last_steps: int = _options.LAST_STEPS,
-    metric_push: bool = _options.METRIC_PUSH,
-    per_train_step: bool = _options.PER_TRAIN_STEP,
-    densify: int = _options.DENSIFY,
-    guided_clip_range: float = _options.GUIDED_CLIP_RANGE,
-    push_weight: str = _options.PUSH_WEIGHT,
-    checked: bool = _options.CHECKED,
-    guide_when_needed: bool = _options.GUIDE_WHEN_NEEDED,
-    anchored: bool = _options.ANCHORED,
-    repair_steps: int = _options.REPAIR_STEPS,
-    hold_unclear: bool = _options.HOLD_UNCLEAR,
-    push_turn: float = _options.PUSH_TURN,
-    bridge_gaps: bool = _options.BRIDGE_GAPS,
-    escape_inside: bool = _options.ESCAPE_INSIDE,
-    follow_obstacles: bool = _options.FOLLOW_OBSTACLES,
-    checkpoint_guidance: bool = _options.TUNED,
-    scheduler: str = typer.Option(None, help="ddpm | ddim (default: the policy's)."),
-    steps: int = typer.Option(None, min=1, help="Denoising steps (default: the policy's)."),
-    obstacle_shape: str = _options.OBSTACLE_SHAPE,
-    margin: float = _options.MARGIN,
-    body: str = _options.BODY,
-    held_radius: float = _options.HELD_RADIUS,
-    refit_obstacles: bool = _options.REFIT_OBSTACLES,
-    obstacle_scenes_only: bool = typer.Option(False, help="With an obstacle variation: the first --episodes seeds "
-                                                          "whose scene has room for its obstacles."),
-    max_steps: int = typer.Option(None, min=1, help="Episode step limit (default: the task's)."),
-    workers: int = typer.Option(1, min=1, help="Parallel episode processes (1 torch thread each)."),
-    video_dir: Path = typer.Option(None, help="Write MP4s of the first --n-videos episodes here."),
-    n_videos: int = typer.Option(2, min=0, help="How many episodes get a video."),
-    seed: int = typer.Option(1_000_000, help="First episode seed (apart from the demonstration seeds)."),
-    segmenter: str = _options.SEGMENTER,
-    detector: str = _options.DETECTOR,
-    detector_dir: Path = _options.DETECTOR_DIR,
-    sam_dir: Path = _options.SAM_DIR,
-    image_size: int = _options.IMAGE_SIZE,
-    env: str = typer.Option(None, "--env", help=_options.ENV_HELP),
-    out: Path = typer.Option(Path("results.json"), help="Results JSON; each finished episode is also appended to "
-                                                        "<out>.episodes.jsonl, from which a killed eval resumes."),
+    checkpoint: Path = typer.Option(None, "--checkpoint", "-c", help="Policy folder or training run (default: the "
+                                                                     "policy packaged for --task)."),
+    task: str = typer.Option(None, help="Task (default: the checkpoint's; `lano3dp tasks` lists them)."),
+    variation: str = typer.Option("clean", help="clean, or axes joined by '+' (`lano3dp tasks` lists them)."),
+    episodes: int = typer.Option(20, min=1, help="Episodes: seeds --seed, --seed + 1, ..."),
+    seed: int = typer.Option(1_000_000, help="First episode seed."),
+    guidance_preset: str = typer.Option("none", "--guidance-preset", metavar="NAME", help=_options.PRESET_HELP),
+    out: Path = typer.Option(None, help="Results JSON (default: in a new `outputs/eval/DATE_TIME/`); a killed eval "
+                                        "resumes from `OUT.episodes.jsonl`."),
+    overwrite: bool = typer.Option(False, "--overwrite", help=_options.OVERWRITE_HELP),
+    workers: int = typer.Option(1, min=1, help="Parallel episode processes."),
+    set_: _options.SetOption = None,
+    config: _options.ConfigOption = None,
+    segmenter: _options.SegmenterOption = "sim",
+    detector: _options.DetectorOption = "grounding_dino",
+    detector_dir: _options.DetectorDirOption = None,
+    sam_dir: _options.SamDirOption = None,
+    image_size: _options.ImageSizeOption = None,
+    env: str = typer.Option(None, "--env", help=_options.ENV_HELP, rich_help_panel=_options.PANEL_ADVANCED),
+    batch: int = typer.Option(1, min=1, help="Episodes stepped together in one process, their chunks sampled in "
+                                             "one call (about twice the episodes per CPU-second at 8-16).",
+                              rich_help_panel=_options.PANEL_ADVANCED),
+    obstacles: list[str] = typer.Option(None, "--obstacles", help="Object to avoid (repeatable; default: every "
+                                                                  "object the scene marks as an obstacle).",
+                                        rich_help_panel=_options.PANEL_ADVANCED),
+    obstacle_scenes_only: bool = typer.Option(False, "--obstacle-scenes-only",
+                                              help="With an obstacle variation: the first --episodes seeds whose "
+                                                   "scene has room for its obstacles.",
+                                              rich_help_panel=_options.PANEL_ADVANCED),
+    max_steps: int = typer.Option(None, min=1, help="Episode step limit (default: the task's).",
+                                  rich_help_panel=_options.PANEL_ADVANCED),
+    success_at: str = typer.Option("first", "--success-at", help="first: success at any step ends the episode | "
+                                                                 "end: success at the episode's last step (as "
+                                                                 "benchmarks such as Fetch count it).",
+                                   rich_help_panel=_options.PANEL_ADVANCED),
+    video_dir: Path = typer.Option(None, help="MP4s of the first --n-videos episodes here.",
+                                   rich_help_panel=_options.PANEL_ADVANCED),
+    n_videos: int = typer.Option(2, min=0, help="How many episodes get a video.",
+                                 rich_help_panel=_options.PANEL_ADVANCED),
+    rerun: Path = typer.Option(None, "--rerun", metavar="DIR", help="A Rerun recording (.rrd) of every episode here "
+                                                                    "(needs lano3dp[viewer]).",
+                                   rich_help_panel=_options.PANEL_ADVANCED),
 ) -> None:
     """Evaluate a policy: success, obstacle contacts, minimum clearance, path length and latency per chunk."""
-    from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from lano3dp.cli import _options
-    from lano3dp.evaluate import EvalConfig, episode_log_path, evaluate, tuned_config
-    from lano3dp.policy.pretrained import packaged_checkpoint
+    from lano3dp.cli import console as make_console
+    from lano3dp.evaluation import EvalConfig, evaluate
+    from lano3dp.evaluation.results import episode_log_path
 
-    console = Console(stderr=True)
-    guidance_settings, obstacle, perception = _options.episode_settings(ctx.params)
+    console = make_console(stderr=True)
+    _options.env_factory(env)  # imported first: it may register plug-ins the settings name
+    if env is None:  # a user's env has its own task names and variations
+        _options.task_name(task)
+        _options.variation(variation)
     _options.existing_path(checkpoint, "--checkpoint")
-    _options.output_path(out, folder=False)
+    _options.existing_path(config, "--config")
+    data = _options.settings_options(ctx, EVAL_FIELDS)
+    if out is None and data.get("out") and Path(data["out"]).exists() and not overwrite:
+        raise typer.BadParameter(f"{data['out']} (the --config's out) holds a finished evaluation; pass --overwrite "
+                                 "to replace it, or another --out", param_hint="--config")
+    if out is None and not data.get("out"):
+        out = _options.run_folder(None, "eval", overwrite=overwrite, marker=RESULTS_NAME) / RESULTS_NAME
+    elif out is not None and out.exists() and not out.is_dir() and not overwrite:
+        raise typer.BadParameter(f"{out} holds a finished evaluation; pass --overwrite to replace it, or another "
+                                 "--out", param_hint="--out")
+    if out is not None:
+        _options.output_path(out, folder=False)
+        data["out"] = str(out)
+        if overwrite:
+            out.unlink(missing_ok=True)
+            episode_log_path(out).unlink(missing_ok=True)
     _options.output_path(video_dir, "--video-dir", folder=True)
-    if checkpoint is None:
-        if task is None:
-            raise typer.BadParameter("give --checkpoint, or --task to evaluate the policy packaged for it",
-                                     param_hint="--checkpoint")
-        checkpoint = packaged_checkpoint(task)
-    config = EvalConfig(
-        checkpoint=str(checkpoint), task=task, variation=variation, episodes=episodes,
-        obstacles=list(obstacles) if obstacles else None, guidance=guidance_settings, obstacle=obstacle,
-        perception=perception, scheduler=scheduler, steps=steps, obstacle_scenes_only=obstacle_scenes_only,
-        max_steps=max_steps, workers=workers, video_dir=str(video_dir) if video_dir else None, n_videos=n_videos,
-        seed=seed, out=str(out), env=env)
-    ran = tuned_config(config, checkpoint).guidance
-    console.print(f"[bold]eval[/bold] {checkpoint} on {task or '(dataset task)'} / {variation}"
-                  + (f" in {env}" if env else "") + f": {episodes} episodes, guidance {guidance}"
-                  + (f" ({guidance_preset}{', as the checkpoint was tuned' if ran != config.guidance else ''}) "
-                     f"rho={ran.rho:g} S={ran.last_steps}" + (f" push turn {ran.push_turn:g} deg" if ran.push_turn
-                                                               else "")
-                     if ran.guided else "")
-                  + f", {workers} worker(s)")
-    for note in ran.ineffective():
-        console.print(f"[yellow]note:[/yellow] {note}")
+    config_ = _options.build_config(EvalConfig, data)
+    if config_.checkpoint is None and config_.task is None:
+        raise typer.BadParameter("give --checkpoint, or --task to evaluate the policy packaged for it",
+                                 param_hint="--checkpoint")
+    console.print(f"[bold]eval[/bold] {config_.checkpoint or f'the policy packaged for {config_.task}'} on "
+                  f"{config_.task or '(its task)'} / {config_.variation}"
+                  + (f" in {config_.env}" if config_.env else "")
+                  + f": {config_.episodes} episodes, guidance {config_.guidance.preset}"
+                  + (f" with {config_.guidance.overrides}" if config_.guidance.overrides else "")
+                  + f", {config_.workers} worker(s)")
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   TextColumn("{task.fields[status]}"), console=console) as bar:
-        handle = bar.add_task("episodes", total=episodes, status="")
+        handle = bar.add_task("episodes", total=config_.episodes, status="")
         successes = collisions = 0
 
         def progress(done: int, total: int, record: dict) -> None:
@@ -111,10 +121,10 @@ def eval_command(
             collisions += bool(record["collided"])
             bar.update(handle, completed=done, status=f"success {successes}/{done}  collided {collisions}/{done}")
 
-        result = evaluate(config, progress=progress, command=command_line(ctx))
+        result = evaluate(config_, progress=progress, command=command_line(ctx))
     if result["timing"]["resumed_episodes"]:
         console.print(f"resumed {result['timing']['resumed_episodes']} finished episode(s) from "
-                      f"{episode_log_path(out)}")
+                      f"{episode_log_path(config_.out)}")
     console.print(summary_line(result["summary"]))
     summary = result["summary"]
     if summary.get("stage_rates"):
@@ -123,7 +133,7 @@ def eval_command(
         console.print(f"[yellow]episodes ended by errors:[/yellow] {', '.join(summary['errors'])}")
     for note in result.get("notes", []):
         console.print(f"[yellow]note:[/yellow] {note}")
-    console.print(f"results: {out}")
+    console.print(f"results: {config_.out}")
 
 
 def summary_line(summary: dict) -> str:
@@ -149,14 +159,12 @@ def command_line(ctx: typer.Context) -> str:
     runner); options left at their defaults are omitted."""
     import shlex
 
-    import click
-
     parts = ["lano3dp", ctx.info_name or ""]
     for param in ctx.command.params:
         value = ctx.params.get(param.name)
         if value is None or value == param.default or (param.multiple and not value):
             continue
-        if isinstance(param, click.Argument):
+        if param.param_type_name == "argument":
             parts.append(str(value))
         elif getattr(param, "is_flag", False):
             parts.append(param.opts[0] if value else (param.secondary_opts or param.opts)[0])

@@ -29,13 +29,18 @@ def train_command(
     data: Path = typer.Option(..., "--data", help="Zarr episode store recorded by `lano3dp collect`."),
     out: Path = typer.Option(..., "--out", help="Run folder; an existing run there is resumed from its last "
                                                 "checkpoint."),
-    steps: int = typer.Option(3000, min=1, help="Total optimisation steps (a resumed run continues up to this)."),
+    steps: int | None = typer.Option(None, min=1, help="Total optimisation steps (default 3000; with --minutes, a cap "
+                                                       "on what the budget buys). A resumed run continues up to this."),
     batch_size: int = typer.Option(64, "--batch-size", min=1, help="Windows per step and per process."),
     lr: float = typer.Option(5e-4, help="AdamW peak learning rate (5e-4 suits CPU-length runs)."),
-    warmup_steps: int = typer.Option(500, "--warmup-steps", help="Linear warm-up steps before the cosine decay."),
-    minutes: float | None = typer.Option(None, help="Stop, checkpointed, after this many CPU-minutes of this "
-                                                    "process (resumes included); the LR's cosine ends where "
-                                                    "this budget or --steps does, whichever comes first."),
+    warmup_steps: int | None = typer.Option(None, "--warmup-steps", help="Linear warm-up steps before the cosine "
+                                                                         "decay (default: a twentieth of the steps, "
+                                                                         "10-500; a resumed run keeps its own)."),
+    minutes: float | None = typer.Option(None, help="A budget of CPU-minutes of this process (resumes included) the "
+                                                    "run plans for: the steps come from a short timing probe "
+                                                    "(capped by --steps when given) and the LR's cosine decays "
+                                                    "over them; the run stops, checkpointed, if the budget runs "
+                                                    "out first."),
     size: Size = typer.Option(Size.compact, help="UNet widths: compact (48,96,192), small (64,128,256), "
                                                  "medium (128,256,512), dp (256,512,1024)."),
     obs_type: str = typer.Option("objects", "--obs-type",
@@ -64,7 +69,7 @@ def train_command(
     ckpt_every: int = typer.Option(1000, "--ckpt-every", help="Steps between checkpoints (the last step always "
                                                               "checkpoints)."),
     device: str = typer.Option("cpu", help="cpu or cuda."),
-    threads: int | None = typer.Option(None, help="Torch intra-op threads (default: torch's choice)."),
+    threads: int | None = typer.Option(None, help="Torch intra-op threads (default: OMP_NUM_THREADS, else 1)."),
     num_workers: int = typer.Option(0, "--num-workers", help="DataLoader worker processes."),
     bf16: bool = typer.Option(False, "--bf16", help="bfloat16 autocast (CPU with AMX: about 19% faster, small)."),
     ema: bool = typer.Option(True, "--ema/--no-ema", help="Save the EMA of the weights as the policy."),
@@ -83,11 +88,11 @@ def train_command(
 
     from lano3dp.cli import _options
     from lano3dp.policy import down_dims_for
-    from lano3dp.train import TrainConfig, policy_config_for_dataset, train
+    from lano3dp.train import TrainConfig, policy_config_for_dataset, run_schedule, train
 
     _options.obs_type(obs_type)
     _options.existing_path(data, "--data")
-    _options.output_path(out, folder=True)
+    _options.output_path(out, folder=True, kind="run")
     _options.device(device)
     # errors past here (a dataset that does not fit, a refused resume) are one line via the CLI's error boundary
     overrides = dict(obs_type=obs_type, point_encoder=encoder.value, down_dims=down_dims_for(size.value),
@@ -99,11 +104,18 @@ def train_command(
     if n_points is not None:
         overrides["n_points"] = n_points
     policy = policy_config_for_dataset(data, **overrides)
-    config = TrainConfig(data=str(data), out=str(out), policy=policy, steps=steps, batch_size=batch_size, lr=lr,
-                         warmup_steps=warmup_steps, val_ratio=val_ratio, val_every=val_every,
+    augmentation = augment_config(augment, augment_yaw)
+    # the steps a --minutes budget buys (train.plan_budget), a resumed run's own, or --steps
+    schedule = run_schedule(out, data, policy, batch_size, cpu_minutes=minutes, steps=steps, warmup_steps=warmup_steps,
+                            threads=threads, seed=seed, augment=augmentation)
+    if schedule.budget_plan is not None:
+        typer.echo(f"{schedule.steps} steps planned for {minutes:g} CPU-min "
+                   f"({schedule.budget_plan.probe_cpu_s_per_step:.3f} CPU-s per step probed)")
+    config = TrainConfig(data=str(data), out=str(out), policy=policy, steps=schedule.steps, batch_size=batch_size,
+                         lr=lr, warmup_steps=schedule.warmup_steps, val_ratio=val_ratio, val_every=val_every,
                          ckpt_every=ckpt_every, seed=seed, device=device, threads=threads, cpu_minutes=minutes,
-                         num_workers=num_workers, bf16=bf16, ema=ema, progress=progress,
-                         augment=augment_config(augment, augment_yaw), time_stride=time_stride)
+                         budget_plan=schedule.budget_plan, num_workers=num_workers, bf16=bf16, ema=ema,
+                         progress=progress, augment=augmentation, time_stride=time_stride)
     final = train(config)
     if int(os.environ.get("RANK", "0")) == 0:
         typer.echo(f"final checkpoint: {final}")

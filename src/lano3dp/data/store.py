@@ -13,6 +13,7 @@ written, are invisible to readers and are overwritten by the next append.
 from __future__ import annotations
 
 import platform
+import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
@@ -28,10 +29,25 @@ FORMAT_VERSION = 1
 # reads, small enough that an append rewrites little.
 _TARGET_CHUNK_BYTES = 2 << 20
 _UNCOMMITTED_END = 0  # fill value of meta/episode_ends
+ZARR_NEEDED = (3, 0, 8)  # the store uses zarr 3's API (create_array, async store listing); pyproject's lower bound
 
 
 class DatasetSchemaError(Lano3dpError, ValueError):
     """An episode does not match the store's keys, shapes or dtypes."""
+
+
+class ZarrVersionError(Lano3dpError, RuntimeError):
+    """The installed zarr cannot write or read an episode store."""
+
+
+def check_zarr_version(path) -> None:
+    """Refuse, before a file is touched, to write or read a store with a zarr older than the store needs (zarr 2
+    would fail half-way, leaving a store that then reads as damaged)."""
+    installed = tuple(int(part) for part in re.findall(r"\d+", zarr.__version__)[:3])
+    if installed < ZARR_NEEDED:
+        needed = ".".join(map(str, ZARR_NEEDED))
+        raise ZarrVersionError(f"{path}: episode stores need zarr >= {needed}, but zarr {zarr.__version__} is "
+                               f"installed; pip install 'zarr>={needed}'")
 
 
 def library_versions() -> dict[str, str]:
@@ -63,6 +79,7 @@ class EpisodeStore:
     @classmethod
     def create(cls, path, attrs: Mapping | None = None, overwrite: bool = False) -> EpisodeStore:
         path = Path(path)
+        check_zarr_version(path)
         if path.exists() and not overwrite:
             raise FileExistsError(f"{path} already exists; open it, or pass overwrite=True")
         root = zarr.open_group(str(path), mode="w")
@@ -83,6 +100,7 @@ class EpisodeStore:
         path = Path(path)
         if not path.exists():
             raise FileNotFoundError(f"dataset {path} does not exist")
+        check_zarr_version(path)
         try:
             root = zarr.open_group(str(path), mode=mode)
             if root.attrs.get("format") != FORMAT_NAME:

@@ -16,26 +16,31 @@ _EXPORTS = {
     "ObstacleSet": "costs", "OrientedBox": "costs", "PointCloudObstacle": "costs", "PositionCost": "costs",
     "Sphere": "costs", "SweptBody": "costs", "densify": "costs", "min_clearance": "costs",
     "obstacle_guidance_cost": "costs", "push_clear": "costs", "ExecutedPath": "costs", "clear_prefix": "costs",
-    "reached_positions": "costs", "TurnedPush": "costs", "ObstacleModel": "obstacle_model",
+    "reached_positions": "costs", "TurnedPush": "costs", "ObstacleTracker": "obstacles", "CostRecipe": "recipe",
+    "ChunkFilter": "execution", "FilterContext": "execution", "FilterResult": "execution", "Proposal": "execution",
+    "register_chunk_filter": "execution", "chunk_filter_names": "execution",
     "CollisionError": "exceptions", "GuidanceError": "exceptions",
     "fit_box": "fitting", "fit_cylinder": "fitting", "bridge_narrow_gaps": "fitting",
     "DenoiseStep": "sampler", "GuidanceConfig": "sampler", "GuidanceMode": "sampler", "denoise": "sampler",
     "ObstacleShape": "shapes", "UnknownObstacleShapeError": "shapes", "get_obstacle_shape": "shapes",
     "obstacle_shape_names": "shapes", "register_obstacle_shape": "shapes", "unregister_obstacle_shape": "shapes",
-    "GUIDANCE_PRESETS": "settings", "GuidanceSettings": "settings", "ObstacleSettings": "settings",
-    "SAFETY_MARGIN": "settings", "load_guidance_tuning": "settings", "save_guidance_tuning": "settings",
+    "GuidanceSettings": "settings", "SamplerSettings": "settings", "CostSettings": "settings",
+    "ObstacleSettings": "settings", "ExecutionSettings": "settings", "SAFETY_MARGIN": "settings",
+    "guidance_preset": "settings", "register_guidance_preset": "settings", "resolve_guidance": "settings",
+    "load_guidance_tuning": "settings", "save_guidance_tuning": "settings",
 }
 
 __all__ = [
-    "GUIDANCE_PRESETS", "SAFETY_MARGIN", "AnchoredPath", "CheckConfig", "CheckedResult", "CollisionError",
-    "Cylinder", "DenoiseStep", "Densified", "ExecutedPath", "GuidanceConfig",
-    "GuidanceError", "GuidanceMode", "GuidanceSettings", "MetricGradient", "Obstacle", "ObstacleSet",
-    "ObstacleModel", "ObstacleSettings", "ObstacleShape", "OrientedBox", "PointCloudObstacle", "PositionCost",
-    "Sphere", "SweptBody", "TurnedPush", "UnknownObstacleShapeError", "bridge_narrow_gaps", "checked_sample",
-    "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "load_guidance_tuning", "min_clearance",
-    "obstacle_guidance_cost", "save_guidance_tuning",
-    "obstacle_shape_names", "push_clear", "clear_prefix", "reached_positions",
-    "register_obstacle_shape", "unregister_obstacle_shape",
+    "SAFETY_MARGIN", "AnchoredPath", "CheckConfig", "CheckedResult", "ChunkFilter", "CollisionError", "CostRecipe",
+    "CostSettings", "Cylinder", "DenoiseStep", "Densified", "ExecutedPath", "ExecutionSettings", "FilterContext",
+    "FilterResult", "GuidanceConfig", "GuidanceError", "GuidanceMode", "GuidanceSettings", "MetricGradient",
+    "Obstacle", "ObstacleSet", "ObstacleSettings", "ObstacleShape", "ObstacleTracker", "OrientedBox",
+    "PointCloudObstacle", "PositionCost", "Proposal", "SamplerSettings", "Sphere", "SweptBody", "TurnedPush",
+    "UnknownObstacleShapeError", "bridge_narrow_gaps", "checked_sample", "chunk_filter_names", "clear_prefix",
+    "denoise", "densify", "fit_box", "fit_cylinder", "get_obstacle_shape", "guidance_preset", "load_guidance_tuning",
+    "min_clearance", "obstacle_guidance_cost", "obstacle_shape_names", "push_clear", "reached_positions",
+    "register_chunk_filter", "register_guidance_preset", "register_obstacle_shape", "resolve_guidance",
+    "save_guidance_tuning", "unregister_obstacle_shape",
 ]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports on demand
@@ -62,15 +67,29 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ imports
         reached_positions,
     )
     from lano3dp.guidance.exceptions import CollisionError, GuidanceError
+    from lano3dp.guidance.execution import (
+        ChunkFilter,
+        FilterContext,
+        FilterResult,
+        Proposal,
+        chunk_filter_names,
+        register_chunk_filter,
+    )
     from lano3dp.guidance.fitting import bridge_narrow_gaps, fit_box, fit_cylinder
-    from lano3dp.guidance.obstacle_model import ObstacleModel
+    from lano3dp.guidance.obstacles import ObstacleTracker
+    from lano3dp.guidance.recipe import CostRecipe
     from lano3dp.guidance.sampler import DenoiseStep, GuidanceConfig, GuidanceMode, denoise
     from lano3dp.guidance.settings import (
-        GUIDANCE_PRESETS,
         SAFETY_MARGIN,
+        CostSettings,
+        ExecutionSettings,
         GuidanceSettings,
         ObstacleSettings,
+        SamplerSettings,
+        guidance_preset,
         load_guidance_tuning,
+        register_guidance_preset,
+        resolve_guidance,
         save_guidance_tuning,
     )
     from lano3dp.guidance.shapes import (

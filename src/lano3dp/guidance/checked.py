@@ -26,7 +26,7 @@ import torch
 from lano3dp.guidance.costs import PositionCost, densify
 from lano3dp.guidance.exceptions import CollisionError
 from lano3dp.guidance.sampler import GuidanceConfig, GuidanceMode
-from lano3dp.guidance.settings import GUIDANCE_PRESETS
+from lano3dp.guidance.settings import CostSettings
 
 SampleFn = Callable[[GuidanceConfig], tuple[torch.Tensor, Any]]
 
@@ -54,7 +54,7 @@ class CheckConfig:
     growth: float = 2.0
     initial_scale: float = 0.1
     max_scale: float = float("inf")
-    densify: int = GUIDANCE_PRESETS["recommended"].densify
+    densify: int = CostSettings.densify
 
     def __post_init__(self):
         if self.max_tries < 1 or self.growth < 1 or self.densify < 1 or self.initial_scale <= 0:

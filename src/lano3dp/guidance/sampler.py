@@ -4,7 +4,7 @@ Algorithm 1 of the paper (Lan-o3dp), in this loop's names:
 
     A_k         sample            the noisy trajectory at diffusion step k (normalised units)
     eps_theta   noise             the network's noise estimate eps_theta(A_k, k, O)
-    mu_k+s_k z  scheduler.step    the DDPM/DDIM posterior step A_{k-1} (diffusers)
+    mu_k+s_k z  scheduler.step    the DDPM/DDIM posterior step A_{k-1} (guidance.schedulers)
     A_0|k       clean_estimate    (A_k - sqrt(1 - abar_k) eps_theta) / sqrt(abar_k)       (Eq. 2)
     D           cost_fn           obstacle cost of a trajectory, in metric units
     S           last_steps        guide only while k <= S (k = diffusers timestep + 1)
@@ -52,6 +52,7 @@ from enum import StrEnum
 import torch
 
 from lano3dp.guidance.exceptions import GuidanceError
+from lano3dp.guidance.schedulers import Generators, draw_normal
 from lano3dp.guidance.settings import PUSH_WEIGHTS
 
 NoiseFn = Callable[[torch.Tensor, torch.Tensor], torch.Tensor]
@@ -134,26 +135,31 @@ def denoise(
     shape: tuple[int, ...],
     *,
     num_inference_steps: int | None = None,
-    generator: torch.Generator | None = None,
+    generator: Generators = None,
     guidance: GuidanceConfig | None = None,
     cost_fn: CostFn | None = None,
     initial_noise: torch.Tensor | None = None,
     on_step: Callable[[DenoiseStep], None] | None = None,
+    device: torch.device | str | None = None,
     dtype: torch.dtype = torch.float32,
 ) -> torch.Tensor:
     """Sample trajectories by reverse diffusion, optionally cost-guided.
 
     Args:
         noise_fn: eps_theta(sample (B, H, D), timestep (B,) long) -> (B, H, D); conditioning is closed over.
-        scheduler: a diffusers DDPMScheduler or DDIMScheduler configured for epsilon prediction.
-            Its timesteps are reset here.
+        scheduler: a `guidance.schedulers` DDPMScheduler or DDIMScheduler (or a diffusers one) configured for
+            epsilon prediction. Its timesteps are reset here.
         shape: (B, H, D) of the normalised trajectory.
         num_inference_steps: defaults to the scheduler's number of training steps.
-        generator: seeds the initial noise and the DDPM noise z.
+        generator: seeds the initial noise and the DDPM noise z; or one generator per sample (B of them),
+            so that each sample gets the noise it would get alone. A CPU generator draws on the CPU and the
+            noise is moved to `device`: a seed gives the same sample on any device.
         guidance: None or mode NONE samples without guidance.
         cost_fn: normalised trajectory (B, H, D) -> per-sample cost (B,); required when guiding.
         initial_noise: A_T, to reproduce a run exactly (else drawn from `generator`).
         on_step: called after each step (diagnostics; Fig. 5 of the paper).
+        device, dtype: of every tensor made here (A_T, the timestep batch, the schedule): the network's
+            (default device: initial_noise's, else the CPU).
 
     Returns:
         (B, H, D) A_0, normalised units.
@@ -174,13 +180,17 @@ def denoise(
         guided_scheduler = type(scheduler).from_config(scheduler.config, clip_sample=not math.isinf(clip_range),
                                                        clip_sample_range=1.0 if math.isinf(clip_range) else clip_range)
         guided_scheduler.set_timesteps(num_inference_steps)
-    alphas_cumprod = scheduler.alphas_cumprod.to(dtype)
-    sample = initial_noise.to(dtype).clone() if initial_noise is not None else torch.randn(
-        shape, generator=generator, dtype=dtype)
+    if device is None:
+        device = initial_noise.device if initial_noise is not None else torch.device("cpu")
+    alphas_cumprod = scheduler.alphas_cumprod.to(device=device, dtype=dtype)
+    if initial_noise is not None:
+        sample = initial_noise.to(device=device, dtype=dtype).clone()
+    else:
+        sample = draw_normal(shape, generator, device, dtype)
     batch = sample.shape[0]
     for timestep in scheduler.timesteps:
         t = int(timestep)
-        t_batch = torch.full((batch,), t, dtype=torch.long)
+        t_batch = torch.full((batch,), t, dtype=torch.long, device=device)
         alpha_bar = alphas_cumprod[t]
         guided = guidance.active(t) and step_scale > 0
         gradient = cost = None
@@ -209,7 +219,7 @@ def denoise(
             weight = 1.0
             if guidance.push_weight == "alpha_bar":
                 previous = t - int(round(stride))
-                alpha_bar_previous = alphas_cumprod[previous] if previous >= 0 else torch.ones((), dtype=dtype)
+                alpha_bar_previous = alphas_cumprod[previous] if previous >= 0 else alphas_cumprod.new_ones(())
                 weight = (alpha_bar * alpha_bar_previous).sqrt()
             next_sample = next_sample - step_scale * weight * gradient  # Algorithm 1, line 7
         if on_step is not None:

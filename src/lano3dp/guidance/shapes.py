@@ -12,7 +12,7 @@ the CLI imports before it checks `--obstacle-shape`):
 
     class Ball(ObstacleShape):
         def fit(self, points, *, held_radius, margin, xy_only): ...
-    register_obstacle_shape("ball", Ball())     # then ObstacleModel(shape="ball"), --obstacle-shape ball
+    register_obstacle_shape("ball", Ball())     # then --set guidance.obstacles.shape=ball
 
 This module imports neither torch nor matplotlib when it is imported (the built-in shapes do inside their methods),
 so the CLI can list the registered names in its --help cheaply.
@@ -138,14 +138,14 @@ _REGISTRY: Registry[ObstacleShape] = Registry("obstacle shape", UnknownObstacleS
 for _name, _shape in (("cylinder", CylinderShape()), ("box", BoxShape()), ("points", PointsShape())):
     _REGISTRY.register(_name, _shape)
 BUILTIN_OBSTACLE_SHAPES = _REGISTRY.mark_builtin()
-# The cost classes the built-in shapes fit, so results saved before they named their shape are still drawn.
+# The cost classes the built-in shapes fit: an obstacle described without naming its shape gets the one of its class.
 _BUILTIN_BY_COST = {"Cylinder": "cylinder", "OrientedBox": "box", "PointCloudObstacle": "points"}
 
 
 def register_obstacle_shape(name: str, shape, *, replace: bool = False) -> ObstacleShape:
     """Make `shape` (an ObstacleShape, or a class of one taking no arguments) available as `name`: to
-    `guidance.obstacle_model.ObstacleModel(shape=name)`, `ObstacleSettings(shape=name)` (in EvalConfig and
-    RunConfig) and `--obstacle-shape name` (same-class re-registration replaces; another class needs `replace=True`)."""
+    `ObstacleSettings(shape=name)` and `--set guidance.obstacles.shape=name` (same-class re-registration
+    replaces; another class needs `replace=True`)."""
     return _REGISTRY.register(name, shape, replace=replace)
 
 
@@ -201,15 +201,11 @@ def describe_obstacle(obstacle, shape: str | None = None) -> dict[str, Any]:
 
 
 def shape_of(data: Mapping[str, Any]) -> ObstacleShape | None:
-    """The shape that draws `describe_obstacle` data: its "kind"; for data saved before obstacles named their
-    kind, the built-in shape of its cost class, else of its numbers (a radius: cylinder, corners: box), as
-    the top view drew them before."""
-    if "kind" in data:  # a shape this process has not registered (a plug-in not imported) is not guessed at
-        return _REGISTRY.get(data["kind"]) if data["kind"] in _REGISTRY.names() else None
-    name = _BUILTIN_BY_COST.get(data.get("shape", ""))
-    if name is None:
-        name = "cylinder" if "radius" in data else "box" if "corners" in data else None
-    return None if name is None else _REGISTRY.get(name)
+    """The shape that draws `describe_obstacle` data: the registered one its "kind" names (None for data without
+    one, or a shape this process has not registered: a plug-in not imported is not guessed at). Descriptions saved
+    before obstacles named their kind are converted by `lano3dp migrate`."""
+    kind = data.get("kind")
+    return _REGISTRY.get(kind) if kind in _REGISTRY.names() else None
 
 
 def draw_obstacle(ax, data: Mapping[str, Any], *, label: str | None = None) -> list:

@@ -4,15 +4,28 @@ A plan that fits the schema and the registry can still be wrong: a model may dro
 the user named, invent one, or swap a target and an obstacle. The offline parser's reading of
 the same instruction is the reference: what it is sure of (obstacles, target attributes) the
 model's plan must contain, and every object the plan names must be said in the instruction.
-Problems are errors (the reply is refused and sent back); a different skill is only a warning,
-since the model may understand a paraphrase the rules do not.
+Problems are errors (the reply is refused and sent back). Beyond the reference, three checks do not depend
+on the rules' reading at all (issue 34):
+- the skill must be one the instruction's own verbs ask for ("put" asks for put_item_in_drawer or
+  bottle_in_drawer, never for bowl_pour); an instruction with no such verb supports no skill;
+- every object the instruction names (`mentions.object_mentions`) must be a target or an obstacle of the plan;
+- an instruction the rules refuse for a reason a model cannot remove (a negated command, two tasks, a
+  contradiction) is refused whatever the model planned.
+A different skill among those the verbs ask for is only a warning.
 """
 
 from __future__ import annotations
 
 from typing import NamedTuple
 
-from lano3dp.language.exceptions import LanguageError
+from lano3dp.language.exceptions import (
+    ContradictionError,
+    InputRejectedError,
+    LanguageError,
+    NegatedCommandError,
+    SeveralTasksError,
+)
+from lano3dp.language.mentions import is_obstacle, unaccounted
 from lano3dp.language.offline import POSITION_WORDS, OfflineDecomposer, lemmas, tokenize
 from lano3dp.language.plan import ObjectRef, TaskPlan
 from lano3dp.language.registry import SceneObjects, scene_vocabulary
@@ -38,10 +51,24 @@ def cross_check(
     said |= {POSITION_WORDS[w] for w in said if w in POSITION_WORDS}
     try:
         reading = rules.decompose(instruction)
+    except (NegatedCommandError, SeveralTasksError, ContradictionError, InputRejectedError) as refusal:
+        return CrossCheck([f"the instruction cannot be planned: {refusal.reason}"], [])
     except LanguageError:
         reading = None
-    expected_obstacles = reading.obstacles if reading is not None else rules.parse(instruction).obstacles
+    parse = rules.parse(instruction)
+    expected_obstacles = reading.obstacles if reading is not None else parse.obstacles
     skill = rules.registry.get(plan.skill) if plan.skill in rules.registry else None
+    asked = rules.skills_asked_for(parse)
+    if plan.skill not in asked:
+        verbs = ", ".join(f"'{v}'" for v in dict.fromkeys(parse.verbs))
+        errors.append(
+            f"the instruction's verbs ({verbs}) ask for {', '.join(sorted(asked))}, not {plan.skill}"
+            if asked
+            else f"the instruction has no verb that asks for {plan.skill} (or any skill)"
+        )
+    for mention in unaccounted(plan, parse.mentions, skill, rules.registry):
+        if reading is None or not is_obstacle(mention, reading):
+            errors.append(f"the instruction names '{mention.phrase}', which the plan neither acts on nor avoids")
 
     objects = scene_vocabulary(scene_objects) if scene_objects is not None else []
 

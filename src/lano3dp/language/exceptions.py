@@ -40,12 +40,64 @@ class UnknownObjectError(PlanValidationError):
         super().__init__(f"{role} '{phrase}' is not in the scene; the scene has: {', '.join(self.scene) or 'nothing'}")
 
 
+class TargetNotInSceneError(UnknownObjectError):
+    """A target the scene does not hold: never replaced by another object of the scene (issue 34). The user may
+    map it explicitly (`lano3dp.language.grounding.ground_plan(..., mapping={"teapot": "block"})`)."""
+
+    def __init__(self, phrase: str, scene: Sequence[str]):
+        self.phrase = phrase
+        self.scene = tuple(scene)
+        PlanValidationError.__init__(
+            self,
+            f"target '{phrase}' is not in the scene; the scene has: {', '.join(self.scene) or 'nothing'} "
+            f"(nothing was done; name one of those, or map the phrase to one explicitly)",
+        )
+
+
+_QUOTED_CHARS = 80  # an instruction quoted in a message: a megabyte of it is no help to anyone
+
+
+def quoted(instruction: str) -> str:
+    """The instruction for a one-line message: at most `_QUOTED_CHARS` characters, no line breaks."""
+    head = str(instruction)[: 2 * _QUOTED_CHARS]  # never split a megabyte to quote 80 characters
+    text = " ".join(head.split())
+    if len(text) <= _QUOTED_CHARS and len(head) == len(str(instruction)):
+        return text
+    return text[: _QUOTED_CHARS - 1] + "…"
+
+
 class InstructionNotUnderstoodError(LanguageError, ValueError):
-    """The offline parser found no skill (or no unique skill) for an instruction."""
+    """The offline parser found no skill (or no unique skill) for an instruction, or refused it.
+
+    Attributes:
+        instruction: the instruction as given.
+        reason: what could not be accepted, one line.
+    """
 
     def __init__(self, instruction: str, reason: str):
         self.instruction = instruction
-        super().__init__(f"cannot plan '{instruction}': {reason}")
+        self.reason = reason
+        super().__init__(f"cannot plan '{quoted(instruction)}': {reason}")
+
+
+class InputRejectedError(InstructionNotUnderstoodError):
+    """The text itself is refused before parsing: too long, a bidirectional override, a mixed-script word."""
+
+
+class NegatedCommandError(InstructionNotUnderstoodError):
+    """The only task asked for is negated ("don't open the drawer"): there is nothing to do."""
+
+
+class SeveralTasksError(InstructionNotUnderstoodError):
+    """Two tasks in one instruction ("open the drawer and put the block in it"); a plan runs one skill."""
+
+
+class ContradictionError(InstructionNotUnderstoodError):
+    """An object is both the one to act on and one to avoid ("put the bottle away without touching the bottle")."""
+
+
+class UnknownVerbError(InstructionNotUnderstoodError):
+    """The instruction asks for its task with a verb no skill is asked for with ("smash the bowl")."""
 
 
 class UncertainObstacleError(InstructionNotUnderstoodError):

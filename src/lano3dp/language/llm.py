@@ -1,11 +1,16 @@
 """LLM decomposer: any OpenAI-compatible endpoint (OpenAI, vLLM, Ollama's /v1, llama.cpp server).
 
-The reply is only ever parsed as JSON and validated (pydantic, then the skill registry, a
-cross-check against the instruction, then the scene); it is never executed. The model may
-refuse explicitly (`PlanReply.refusal`). An invalid reply gets one retry with the problem added
-to the conversation; if that fails too, the model refuses, or the endpoint is unreachable or
-slow, the offline rule parser answers instead and a `LLMFallbackWarning` says why (also when
-the rules then refuse too).
+The instruction is normalised and bounded first (`normalize.normalize_instruction`: a refused text is never
+sent). The reply is only ever parsed as JSON and validated (pydantic, then the skill registry, a
+cross-check against the instruction and the safety invariant of `mentions`, then the scene); it is never
+executed. The model may refuse explicitly (`PlanReply.refusal`). An invalid reply gets one retry that quotes
+only the problem (never the reply itself); if that fails too, the model refuses, or the endpoint is
+unreachable, slow or answers something that is not a completion (an HTML page with HTTP 200), the offline rule
+parser answers instead and a `LLMFallbackWarning` says why in one line (also when the rules then refuse too).
+
+Each request has a total deadline (`LLMConfig.timeout`, for the whole reply, not for each read: a server that
+drips one byte a second cannot hold it longer) and a bounded reply size (`MAX_REPLY_BYTES`); the body is read
+as a stream and the connection closed at either bound.
 
 The response format is negotiated: a JSON schema where the server takes one; a server that
 answers it with an HTTP error (llama.cpp's answers 500) is asked again in JSON mode, with the
@@ -17,6 +22,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import time
 import warnings
 from dataclasses import dataclass, field
 from typing import Literal
@@ -24,12 +30,16 @@ from typing import Literal
 from pydantic import ValidationError
 
 from lano3dp.language.crosscheck import cross_check
-from lano3dp.language.exceptions import LanguageError, PlanValidationError
+from lano3dp.language.exceptions import LanguageError, PlanValidationError, quoted
+from lano3dp.language.normalize import normalize_instruction
 from lano3dp.language.offline import OfflineDecomposer
 from lano3dp.language.plan import PlanReply, TaskPlan, plan_json_schema
 from lano3dp.language.registry import SceneObjects, SkillRegistry, default_registry, describe_scene
 
 _FENCE = re.compile(r"^\s*```(?:json)?\s*(.*?)\s*```\s*$", re.DOTALL)
+# A plan is under 150 tokens; a completion carrying it, its usage and ids is a few kB. More is not a plan.
+MAX_REPLY_BYTES = 64 * 1024
+_PROBLEM_CHARS = 300  # what a retry or a warning quotes of a problem
 
 
 class LLMFallbackWarning(UserWarning):
@@ -42,6 +52,10 @@ class LLMPlanError(LanguageError):
 
 class LLMRefusedError(LLMPlanError):
     """The model said no skill can do the instruction, and no fallback was configured."""
+
+
+class EndpointReplyError(LanguageError, ValueError):
+    """The endpoint's answer is no completion: not JSON (an HTML error page with HTTP 200), too large, or late."""
 
 
 # HTTP statuses with which servers reject a response format they do not support (llama.cpp: 500).
@@ -61,9 +75,9 @@ class LLMConfig:
         base_url: endpoint root, e.g. "http://127.0.0.1:8000/v1"; None means api.openai.com.
         model: model name the endpoint serves.
         api_key: bearer token; local servers accept any non-empty string.
-        timeout: seconds per request (no automatic HTTP retries: a slow LLM falls back instead); a
-            request that runs out of time is cancelled (its connection closed, which stops generation
-            on llama.cpp and vLLM).
+        timeout: seconds for a whole request, reply included (no automatic HTTP retries: a slow LLM falls
+            back instead); a request that runs out of time is cancelled (its connection closed, which stops
+            generation on llama.cpp and vLLM).
         response_format: "auto" (default: json_schema, and JSON mode with the schema where the server
             rejects that), or one of "json_schema" (OpenAI, vLLM, Ollama), "json_object" (JSON mode,
             schema in the prompt only) to skip the negotiation.
@@ -205,6 +219,8 @@ class LLMDecomposer:
     def decompose_with_report(self, instruction: str, scene_objects: SceneObjects | None = None) -> PlanOutcome:
         import openai
 
+        normalized = normalize_instruction(instruction)  # refused input raises here, before any request
+        instruction = normalized.text
         user = f"Instruction: {instruction}"
         if scene_objects is not None:
             user += f"\nObjects in the scene (use only these): {', '.join(describe_scene(scene_objects))}"
@@ -214,8 +230,8 @@ class LLMDecomposer:
         for attempt in range(2):
             try:
                 content, cut_off = self._ask(messages)
-            except (openai.OpenAIError, ValueError) as error:  # ValueError: an HTTP 200 whose body is not JSON
-                errors.append(f"endpoint error: {type(error).__name__}: {str(error)[:200]}")
+            except (openai.OpenAIError, EndpointReplyError) as error:
+                errors.append(f"endpoint error: {type(error).__name__}: {_one_line(str(error))}")
                 break
             replies.append(content or "")
             try:
@@ -229,25 +245,28 @@ class LLMDecomposer:
                 if scene_objects is not None:
                     plan = self._grounder.ground(plan, scene_objects)
                 plan = self.registry.validate(plan, scene_objects)
-                plan = plan.model_copy(update={"warnings": [*plan.warnings, *check.warnings]})
+                plan = plan.model_copy(update={"warnings": [*normalized.warnings, *plan.warnings, *check.warnings]})
                 source = "llm" if attempt == 0 else "llm_retry"
                 return PlanOutcome(plan, source, errors, replies, self._format)
             except _Refused as refusal:
                 errors.append(f"the model refused: {refusal}")
                 break
             except (ValueError, ValidationError, PlanValidationError) as error:
-                problem = _describe(error)
+                problem = _one_line(_describe(error))
                 errors.append(problem)
-                messages += [
-                    {"role": "assistant", "content": content or ""},
+                # Only the problem goes back: the invalid reply itself (possibly large, possibly an injection
+                # the model was fed) is not quoted to the server again.
+                messages = [
+                    *messages[:2],
                     {
                         "role": "user",
-                        "content": f"That plan is invalid: {problem}\nReply with the corrected JSON plan only.",
+                        "content": f"Your previous plan was invalid: {problem}\n"
+                        "Reply with the corrected JSON plan only.",
                     },
                 ]
         if self.fallback is None:
             kind = LLMRefusedError if errors and errors[-1].startswith("the model refused") else LLMPlanError
-            raise kind(f"the LLM gave no valid plan for '{instruction}': {'; '.join(errors)}")
+            raise kind(f"the LLM gave no valid plan for '{quoted(instruction)}': {'; '.join(errors)}")
         message = f"LLM plan rejected ({'; '.join(errors)}); using the offline parser"
         # Warned before the fallback runs, so a caller sees why the LLM was passed over even if the rules refuse.
         warnings.warn(LLMFallbackWarning(message), stacklevel=2)
@@ -269,7 +288,12 @@ class LLMDecomposer:
 
     def _ask(self, messages: list[dict]) -> tuple[str | None, bool]:
         """One request: (the reply's text, whether max_tokens cut it off); negotiates the response
-        format on the first call ("auto")."""
+        format on the first call ("auto").
+
+        Raises:
+            openai.OpenAIError: the endpoint failed (status, connection, a read that timed out).
+            EndpointReplyError: the body is not a completion, exceeds `MAX_REPLY_BYTES`, or missed the deadline.
+        """
         import openai
 
         if self._format is not None:
@@ -278,30 +302,46 @@ class LLMDecomposer:
             candidates = list(_FORMATS)
         else:
             candidates = [self.config.response_format]
+        deadline = time.monotonic() + self.config.timeout
         for k, name in enumerate(candidates):
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise EndpointReplyError(f"no reply within the {self.config.timeout:g} s deadline")
             try:
-                response = self.client.chat.completions.create(
-                    model=self.config.model,
-                    messages=messages,
-                    response_format=self._response_format(name),
-                    temperature=self.config.temperature,
-                    max_tokens=self.config.max_tokens,
-                    timeout=self.config.timeout,
-                )
+                body = self._request(name, messages, deadline)
             except openai.APIStatusError as error:
                 if error.status_code in _FORMAT_REJECTED and k + 1 < len(candidates):
                     self.format_errors.append(f"{name}: HTTP {error.status_code}")
                     continue
                 raise
-            except openai.APITimeoutError:
+            except (openai.APITimeoutError, EndpointReplyError):
                 self._cancel()
                 raise
             self._format = name
             break
-        if not response.choices:
-            return None, False
-        choice = response.choices[0]
-        return choice.message.content, choice.finish_reason == "length"
+        return _completion_text(body)
+
+    def _request(self, name: str, messages: list[dict], deadline: float) -> bytes:
+        """The raw body of one completion request, read as a stream within `deadline` and `MAX_REPLY_BYTES`."""
+        remaining = max(deadline - time.monotonic(), 0.001)
+        with self.client.chat.completions.with_streaming_response.create(
+            model=self.config.model,
+            messages=messages,
+            response_format=self._response_format(name),
+            temperature=self.config.temperature,
+            max_tokens=self.config.max_tokens,
+            timeout=remaining,  # bounds the connection and each read; the loop below bounds the whole body
+        ) as response:
+            body = bytearray()
+            for chunk in response.iter_bytes():
+                body += chunk
+                if len(body) > MAX_REPLY_BYTES:
+                    raise EndpointReplyError(f"the reply exceeds {MAX_REPLY_BYTES // 1024} KiB; not a plan")
+                if time.monotonic() > deadline:
+                    raise EndpointReplyError(
+                        f"the reply was still arriving after the {self.config.timeout:g} s deadline"
+                    )
+            return bytes(body)
 
     def _cancel(self) -> None:
         """Drop the connection of a timed-out request: servers stop generating for a closed connection."""
@@ -309,6 +349,34 @@ class LLMDecomposer:
         if self._owns_client and client is not None:
             client.close()
             self._client = None
+
+
+def _completion_text(body: bytes) -> tuple[str | None, bool]:
+    """(text, cut off by max_tokens) of a chat completion body; EndpointReplyError for anything else."""
+    try:
+        completion = json.loads(body)
+    except (UnicodeDecodeError, json.JSONDecodeError):
+        start = body[:40].decode("utf-8", "replace")
+        raise EndpointReplyError(
+            f"HTTP 200 with a body that is not JSON ({len(body)} bytes, starting {start!r}); is the base URL an "
+            "OpenAI-compatible /v1 endpoint?"
+        ) from None
+    choices = completion.get("choices") if isinstance(completion, dict) else None
+    if not isinstance(choices, list):
+        raise EndpointReplyError("HTTP 200 with JSON that is not a chat completion (no 'choices')")
+    if not choices:
+        return None, False
+    choice = choices[0] if isinstance(choices[0], dict) else {}
+    message = choice.get("message") if isinstance(choice.get("message"), dict) else {}
+    content = message.get("content")
+    if content is not None and not isinstance(content, str):
+        raise EndpointReplyError("HTTP 200 with a completion whose message content is not text")
+    return content, choice.get("finish_reason") == "length"
+
+
+def _one_line(text: str) -> str:
+    text = " ".join(text.split())
+    return text if len(text) <= _PROBLEM_CHARS else text[: _PROBLEM_CHARS - 1] + "…"
 
 
 def _describe(error: Exception) -> str:

@@ -1,8 +1,10 @@
 """Offline instruction decomposer: rules over a verb lexicon and noun phrases, no model needed.
 
-How an instruction is read (each step is a small function below):
-0. Tokenise; move post-nominal positions in front ("the bowl on the left" -> "the left bowl")
-   and resolve "one"-anaphora ("a red one" -> "a red bowl").
+How an instruction is read (each step is a small function below; docs/language.md says it for users):
+0. Normalise and bound the text (`normalize`), tokenise, read typos and everyday verbs (`spelling`, each with a
+   warning), find every object mention (`mentions`); move post-nominal positions in front ("the bowl on the
+   left" -> "the left bowl"), resolve "one"-anaphora ("a red one" -> "a red bowl"), and take negated task
+   clauses ("don't open the drawer") out of the task.
 1. Find obstacle declarations: cues ("avoid", "without touching", "keep clear of", "watch out
    for", "but not", ...) govern the words up to the next clause; predicates ("X is in the way",
    "there is an X on the path", "X counts as an obstacle", "X must not be touched") govern the
@@ -18,7 +20,12 @@ How an instruction is read (each step is a small function below):
    and scores under 2 are errors, not guesses).
 4. Map nouns onto the winning skill's slots in slot order; a slot nobody mentioned gets its
    own word ("water the plant" -> watering can, plant), since the policy needs that object.
-   An obstacle that is one of the targets ("pour the bowl, don't spill the bowl") is dropped with a warning.
+   An obstacle that is one of the targets is a contradiction, refused ("put the bottle away without touching
+   the bottle"), unless the cue asks for care ("pour the bowl, don't spill the bowl": a warning).
+5. Refuse two tasks (clause verbs with no skill in common) and an instruction whose only task is negated or has
+   no verb a skill is asked for with (never planned from its nouns alone).
+6. The safety invariant (`mentions.enforce_mentions`): every object named is a target or an obstacle.
+7. With a scene, ground it (`grounding.ground_plan`): a target is never replaced by another object.
 
 An optional `PhraseMatcher` (sentence embeddings) maps verbs and nouns the lexicon lacks onto
 the registry and the scene; only the verb phrase is embedded, since whole-sentence embeddings
@@ -27,13 +34,25 @@ are dominated by the object nouns.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
-from lano3dp.language.exceptions import InstructionNotUnderstoodError, UncertainObstacleError, UnknownObjectError
-from lano3dp.language.plan import ObjectRef, TaskPlan
+from lano3dp.language import spelling
+from lano3dp.language.exceptions import (
+    ContradictionError,
+    InstructionNotUnderstoodError,
+    NegatedCommandError,
+    SeveralTasksError,
+    UncertainObstacleError,
+    UnknownVerbError,
+)
+from lano3dp.language.grounding import ground_plan
+from lano3dp.language.mentions import Mention, enforce_mentions, object_mentions
+from lano3dp.language.normalize import normalize_instruction
+from lano3dp.language.plan import MAX_NAME_CHARS, MAX_OBSTACLES, ObjectRef, TaskPlan
 from lano3dp.language.registry import (
     SceneObjects,
     SkillRegistry,
@@ -42,12 +61,13 @@ from lano3dp.language.registry import (
     default_registry,
     scene_vocabulary,
 )
-from lano3dp.vocabulary import COLOURS, SIZE_WORDS, canonical_attribute, resolve_phrase, singular
+from lano3dp.vocabulary import COLOURS, OBJECT_NOUNS, SIZE_WORDS, canonical_attribute, singular
 
 _WORD = re.compile(r"[a-z]+(?:'[a-z]+)?|[.,;:!?]")
 _SENTENCE_END = frozenset(".;:!?")
+_CLITICS = ("'s", "'re", "'m", "'ve", "'ll", "'d")  # "they're" -> they 're: the pronoun stays a pronoun
 DETERMINERS = frozenset(
-    """the a an this that these those its my your our their his her some any another both either each
+    """the a an this that these those its my your our their his her some any another both either each every
     all two three four few several""".split()
 )
 # Position words, kept as said; like colours they narrow which instance is meant ("the top drawer").
@@ -63,7 +83,7 @@ _BOUNDARY = frozenset(
     """in into on onto over under from to with without of at by near next beside behind inside out up down
     off away back for using toward towards across through around while and or but then so that which who
     please again too there here it them is are be was were can could would will should if when before 's
-    after until as not don't do does very now just also still nearby close somewhere""".split()
+    after until as not don't do does very now just also still nearby close somewhere past 're 'm 've 'll 'd""".split()
 )
 # Nouns that never name an object to look at.
 _NON_OBJECTS = frozenset(
@@ -85,14 +105,48 @@ _PRONOUNS = {
 _LIST_SEPARATORS = frozenset({"and", "or", ",", "nor", "plus"})
 _CLAUSE_ENDS = frozenset({"then", "while", "but", "before", "after", "when", "so", "once", "until", "because"})
 _POLITE = frozenset("please could would can will you robot okay ok now i need want to like kindly go ahead".split())
-_COPULAS = frozenset("is are 's was were be been being sits sit stands stand lies lie".split())
-_PLURAL_COPULAS = frozenset("are were sit stand lie".split())
+_COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands stand lies lie".split())
+_PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
 _WARNINGS = frozenset("careful caution warning attention heads".split())
 _STANCE = frozenset("sitting standing lying placed located resting positioned kept".split())
 # Words before a noun that make it a landmark ("the drawer under the microwave"), not a task object.
-_LOCATIVES = frozenset("next near beside behind under below beneath above by besides opposite of close".split())
+_LOCATIVES = frozenset("next near beside behind under below beneath above by besides opposite of close past".split())
+# After "right", these make it an adverb of place or time, not the verb of bottle_upright.
+_RIGHT_AS_ADVERB_BEFORE = _LOCATIVES | frozenset("there here now away in on at into onto in front after up".split())
 # Verbs any manipulation can be said with; a skill that owns none of the others was not asked for.
 _GENERIC_VERBS = frozenset("put place set move take get bring transfer drop rest return raise fill".split())
+# Negation of a task verb: "don't / never VERB", "do not / try not to VERB" (issue 34: a negated command is refused).
+# Verbs of abstaining are negators too ("refrain from putting", "skip opening", "no need to sweep", "you needn't
+# open", "hold off on pouring"): each only when a task verb follows, so "skip the red block" is no negation.
+_NEGATORS = frozenset(
+    "don't dont never cannot can't shouldn't mustn't needn't neednt refrain skip stop quit cease abstain".split()
+)
+_NOT_AFTER = frozenset("do does please must should try better need".split())
+_NEGATION_FILLER = frozenset(
+    "you ever even please try to go and just accidentally dare want need wish from on with bother bothering".split()
+)
+_NEGATING_BEFORE = {"no": "need", "off": "hold"}  # "no need to ...", "hold off on ...": the word and the one before
+_DESTINATIONS = frozenset("in into inside onto on".split())
+# Cue words that ask for care with an object rather than distance from it: said of a target they are no
+# contradiction ("pour the bowl, don't spill it"); "avoid" or "don't touch" said of a target is one.
+_CARE_WORDS = frozenset(
+    """spill drop break damage scratch smash crack dent tip topple upset knock tilt shake crush fragile delicate
+    hot breakable sharp precious valuable wobbly unstable expensive careful caution gently""".split()
+)
+# Properties that declare the object they are said of an obstacle ("the glass is fragile").
+_PROPERTY_WORDS = frozenset("fragile delicate breakable hot sharp precious valuable wobbly unstable expensive".split())
+_DEGREE = frozenset("very quite really extremely super so too rather a bit".split())
+# What may stand between a clause break and its verb ("and then carefully pour").
+_CLAUSE_OPENERS = frozenset(
+    "please now then also just carefully gently slowly first next finally go ahead and to you".split()
+)
+_TASK_BREAKS = frozenset(". ; : ! ? , and then also".split())
+# Words between a subject and its predicate ("the mug and the cup are all in the way").
+_SUBJECT_SKIPS = frozenset("also still currently right now just all both each looks seems look seem".split())
+_COMPOUND_MODIFIERS = frozenset("water table counter trash soup door lid coffee tea wine".split())
+_DETACHABLE = frozenset("lid cap cork cover case stopper".split())  # parts that come off: objects of their own
+_MAX_COMPOUND = 3  # words of an object's name: "small red coffee mug" has two, "watering can" two
+_QUANTIFIED = frozenset("any all each every either none both neither".split())  # "any of them"
 
 # Obstacle cues as token patterns; "<ing>" is any -ing word, "<hit>" a collision verb, "<det>" a determiner.
 _CUES: tuple[tuple[str, ...], ...] = (
@@ -103,7 +157,9 @@ _CUES: tuple[tuple[str, ...], ...] = (
     ("distance", "from"), ("far", "from"), ("nowhere", "near"), ("not", "to", "<hit>"), ("don't", "<hit>"),
     ("dont", "<hit>"), ("not", "<hit>"), ("never", "<hit>"), ("but", "not"), ("and", "not"),
     ("not", "near"), ("not", "close", "to"), ("not", "<det>"), ("watch", "<det>"),
+    ("skip", "<det>"),  # "skip the red block and put the blue one in ...": left alone, so avoided
 )  # fmt: skip
+_CONTRASTS = frozenset({("not", "<det>"), ("but", "not"), ("and", "not")})
 # Predicates said of the noun phrase before them ("the mug is in the way").
 _WAY_MARKERS: tuple[tuple[str, ...], ...] = (
     ("in", "the", "way"), ("in", "my", "way"), ("in", "your", "way"), ("in", "its", "way"),
@@ -130,12 +186,15 @@ _SUBJECT_STOPS = (
 def tokenize(text: str) -> list[str]:
     """Lower-case words and punctuation; "bowl's" -> bowl 's, "there's" -> there 's (the noun stays a noun)."""
     words = []
+    text = re.sub(r"\s[-–—]+\s|[–—]", " , ", text)  # a dash between words breaks the clause like a comma
     for word in _WORD.findall(text.lower().replace("’", "'")):
-        words.extend([word[:-2], "'s"] if word.endswith("'s") and len(word) > 2 else [word])
+        ending = next((e for e in _CLITICS if word.endswith(e) and len(word) > len(e)), None)
+        words.extend([word[: -len(ending)], ending] if ending else [word])
     return words
 
 
-def lemmas(word: str) -> set[str]:
+@functools.lru_cache(maxsize=8192)
+def lemmas(word: str) -> frozenset[str]:
     """Candidate base forms of an inflected verb or noun ("putting" -> put, "stored" -> store)."""
     forms = {word}
     if word.endswith("ing") and len(word) > 5:
@@ -150,7 +209,7 @@ def lemmas(word: str) -> set[str]:
             forms.add(stem[:-1])
     if word.endswith("s") and len(word) > 3:
         forms |= {word[:-1], singular(word)}
-    return forms
+    return frozenset(forms)
 
 
 def _matches(pattern: str, word: str) -> bool:
@@ -178,6 +237,7 @@ class _Noun:
     size: str | None
     known: bool  # a registry or scene word, not just a head noun after a determiner
     index: int = 0  # token index, to resolve "avoid it" to the object named before
+    end: int = 0  # token index after its words (its words: index to end)
     position: str | None = None
     in_task: bool = True  # said in a sentence with a lexicon verb, not in "there are two bowls."
     landmark: bool = False  # after "next to", "under", ...: where something is, not what to act on
@@ -210,6 +270,10 @@ class Parse:
     references: list[_Reference] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
     declared: list[tuple[int, ObjectRef]] = field(default_factory=list)  # (token index, obstacle) as declared
+    cue_of: dict[ObjectRef, str] = field(default_factory=dict)  # obstacle -> the cue that declared it
+    mentions: list[Mention] = field(default_factory=list)  # every object named (mentions.object_mentions)
+    negated: list[str] = field(default_factory=list)  # negated task clauses ("don't open the drawer")
+    verb_at: list[tuple[int, str]] = field(default_factory=list)  # (token index, verb) of task verbs
 
 
 class OfflineDecomposer:
@@ -227,7 +291,7 @@ class OfflineDecomposer:
         matcher: PhraseMatcher | None = None,
         match_threshold: float = 0.6,
     ):
-        self.registry = registry or default_registry()
+        self.registry = _with_shared_synonyms(registry or default_registry())
         self.matcher = matcher
         self.match_threshold = match_threshold
         all_verbs = dict.fromkeys(v for s in self.registry for v in s.verbs)
@@ -237,6 +301,14 @@ class OfflineDecomposer:
         self._vocabulary = sorted(
             {w for s in self.registry for slot in s.slots for w in slot.synonyms}, key=lambda w: -len(w.split())
         )
+        # Every word the rules read, so the spelling corrector leaves it alone.
+        self._known_words = (
+            DETERMINERS | POSITION_WORDS.keys() | _MODIFIERS | _BOUNDARY | _NON_OBJECTS | _COLLISION_VERBS
+            | _PARTICLES | _POLITE | _COPULAS | _WARNINGS | _STANCE | _LOCATIVES | _GENERIC_VERBS | _OBSTACLE_NOUNS
+            | _PREDICATE_FILLER | _PROPERTY_WORDS | _CARE_WORDS | OBJECT_NOUNS | _NEGATORS
+            | {w for cue in (*_CUES, *_WAY_MARKERS) for w in cue} | {w for v in self._verbs for w in v.split()}
+            | {w for entry in self._vocabulary for w in entry.split()}
+        )  # fmt: skip
 
     # ---- public API -------------------------------------------------------------------------
 
@@ -252,36 +324,64 @@ class OfflineDecomposer:
             UnknownObjectError / SlotMismatchError: the plan does not fit the scene or the skill.
         """
         parse = self.parse(instruction, scene_objects)
+        _refuse_question(instruction, parse)
+        self._check_one_task(instruction, parse)
         skill = self._choose_skill(instruction, parse)
         self._check_fit(instruction, skill, parse)
         self._resolve_references(instruction, skill, parse)
-        targets = self._fill_slots(skill, parse.nouns)
-        obstacles = self._drop_targets(skill, targets, parse)
+        targets, target_nouns = self._fill_slots(skill, parse.nouns)
+        obstacles = self._drop_targets(instruction, skill, targets, parse)
+        _check_obstacle_count(instruction, obstacles)
         plan = TaskPlan(skill=skill.name, targets=targets, obstacles=obstacles, warnings=parse.warnings)
+        # a mention among a target's own words is that target ("the remote control", "the rubber duck")
+        target_words = {i for noun in target_nouns for i in range(noun.index, max(noun.end, noun.index + 1))}
+        mentions = [m for m in parse.mentions if m.index not in target_words]
+        plan = enforce_mentions(plan, mentions, skill, self.registry)
+        _check_obstacle_count(instruction, plan.obstacles)
         if scene_objects is not None:
-            plan = self._ground_in_scene(plan, skill, scene_objects)
+            plan = self.ground(plan, scene_objects)
         return self.registry.validate(plan, scene_objects)
 
     def ground(self, plan: TaskPlan, scene_objects: SceneObjects) -> TaskPlan:
-        """`plan` with targets and obstacles renamed to the scene's object kinds where a slot synonym
-        (or the embedding matcher) says they mean the same ("skillet" -> the scene's "pan").
+        """`plan` with targets and obstacles renamed to the scene's object kinds where a registered slot synonym
+        says they mean the same ("skillet" -> the scene's "pan"); never one object for another
+        (`lano3dp.language.grounding.ground_plan`).
 
         Raises:
             UnknownSkillError: the plan's skill is not registered.
-            UnknownObjectError: an object matches nothing in the scene.
+            TargetNotInSceneError: a target the scene does not hold.
+            UnknownObjectError: an obstacle matches nothing in the scene.
         """
         skill = self.registry.get(plan.skill)
         if len(plan.targets) != len(skill.slots):
             return plan  # validation reports the count mismatch with the slot words
-        return self._ground_in_scene(plan, skill, scene_objects)
+        grounded = ground_plan(plan, scene_objects, self.registry, matcher=self.matcher,
+                               match_threshold=self.match_threshold)
+        return grounded.plan.model_copy(update={"warnings": [*grounded.plan.warnings, *grounded.notes]})
+
+    def skills_asked_for(self, parse: Parse) -> set[str]:
+        """Skills the task verbs of `parse` ask for (with the embedding matcher, also its reading of the verb)."""
+        skills = {name for verb in parse.verbs for name in self._verbs[verb]}
+        if not skills and self.matcher is not None and parse.verb_phrase:
+            skills = self._matcher_skills(parse.verb_phrase)
+        return skills
 
     def parse(self, instruction: str, scene_objects: SceneObjects | None = None) -> Parse:
-        words = tokenize(instruction)
+        """The intermediate reading of `instruction` (normalised first: `normalize.normalize_instruction`).
+
+        Raises:
+            InputRejectedError: the text is refused before it is read (too long, mixed scripts, ...).
+        """
+        normalized = normalize_instruction(instruction)
+        words = tokenize(normalized.text)
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
+        words, read_as = self._read_words(words, vocabulary)
         words = _front_positions(words)
+        mentions = object_mentions(words, [*self._vocabulary, *scene_kinds], self._single_verbs)
         words = self._resolve_one_anaphora(words, vocabulary)
-        parse = Parse(tokens=list(words))
+        parse = Parse(tokens=list(words), warnings=[*normalized.warnings, *read_as], mentions=mentions)
+        self._mask_negated(words, parse)
         task_mask = [True] * len(words)
         spans = [(start, end, start, end, cue) for start, end, cue in self._obstacle_spans(words)]
         spans += self._predicate_spans(words)
@@ -292,8 +392,9 @@ class OfflineDecomposer:
         task = [w if keep else "," for w, keep in zip(words, task_mask, strict=True)]
         verb_positions = self._find_verbs(task, parse)
         parse.nouns = self._find_nouns(task, verb_positions, vocabulary)
-        sentence = [sum(w in _SENTENCE_END for w in words[:i]) for i in range(len(words))]
+        sentence = _running_count(words, _SENTENCE_END)  # sentence index of each token
         with_verb = {sentence[i] for i in verb_positions}
+        previous_noun = None
         for noun in parse.nouns:
             noun.in_task = not with_verb or sentence[noun.index] in with_verb
             k = noun.index - 1
@@ -302,8 +403,99 @@ class OfflineDecomposer:
             noun.landmark = k >= 0 and task[k] in _LOCATIVES | {"to"} and (task[k] != "to" or task[k - 1] in _LOCATIVES)
             noun.destination = k >= 0 and task[k] in ("into", "onto")
             noun.source = k >= 0 and (task[k] in ("from", "off") or (task[k] == "of" and task[k - 1 : k] == ["out"]))
+            if k >= 0 and task[k] in ("and", "or") and previous_noun is not None and previous_noun.landmark:
+                noun.landmark = True  # "past the mug and the jar": both are landmarks
+            previous_noun = noun
         parse.obstacles = list(dict.fromkeys(parse.obstacles))
         return parse
+
+    def _read_words(self, words: list[str], vocabulary: Sequence[str]) -> tuple[list[str], list[str]]:
+        """Everyday verbs ("pop ... in") and typos of the rules' verbs and nouns, read as the words they mean;
+        one warning per word read otherwise (`spelling`)."""
+        words, everyday = spelling.everyday_verbs(words, self._verbs)
+        verbs = sorted(self._single_verbs | {v[0] for v in self._phrasal})
+        nouns = sorted({w for entry in vocabulary for w in entry.split()} | OBJECT_NOUNS)
+        known = self._known_words | set(nouns)
+
+        def is_known(word: str) -> bool:
+            return word in known or bool(lemmas(word) & known) or singular(word) in known
+
+        # Never read an unknown word as one that names no object ("avoid the duss" as "the dust"): the object
+        # said would be dropped; unread, it stays a named object and is avoided.
+        objects = [w for w in nouns if w not in _NON_OBJECTS]
+        words, typos = spelling.correct_typos(words, is_known, verbs, objects)
+        warnings = [f"read '{c.said}' as '{c.read_as}'" for c in everyday]
+        warnings += [f"read '{c.said}' as '{c.read_as}' (a typo?)" for c in typos]
+        return words, warnings
+
+    def _mask_negated(self, words: list[str], parse: Parse) -> None:
+        """ "don't open the drawer", "never pour ...", "do not put ...": a negated task clause is no task. Its
+        words become clause breaks (its objects stay mentions, so they are avoided). A negated collision verb
+        ("don't move the mug") is an obstacle cue instead, unless it says where to ("don't move it into ...")."""
+        for i, word in enumerate(words):
+            negates = (
+                word in _NEGATORS
+                or word == "not" and i and words[i - 1] in _NOT_AFTER
+                or word == "no" and words[i + 1 : i + 2] == [_NEGATING_BEFORE["no"]]
+                or word == "off" and i and words[i - 1] == _NEGATING_BEFORE["off"]
+            )
+            if not negates:
+                continue
+            j = i + 1
+            while j < len(words) and words[j] in _NEGATION_FILLER:
+                j += 1
+            if j >= len(words):
+                continue
+            forms = lemmas(words[j])
+            if not (forms & self._single_verbs or any(v[0] in forms for v in self._phrasal)):
+                continue
+            end = j + 1
+            while end < len(words) and words[end] != "," and not self._clause_ends(words, end):
+                end += 1
+            if forms & _COLLISION_VERBS and not _DESTINATIONS & set(words[j:end]):
+                if not any(t in self._single_verbs for t in forms - _COLLISION_VERBS):
+                    parse.negated.append(" ".join(words[i:end]))  # also a cue; refused if nothing else is asked
+                    continue
+            start = i - 1 if i and words[i - 1] in ("do", "try", "hold") else i
+            parse.negated.append(" ".join(words[start:end]))
+            for k in range(start, end):
+                words[k] = ","
+
+    def _check_one_task(self, instruction: str, parse: Parse) -> None:
+        """Refuse two tasks in one instruction: task verbs that start clauses ("open the drawer and put the block
+        in it", "..., then close the microwave") and have no skill in common. A clause of only generic verbs
+        ("take the bowl and pour it") counts only when it says where to ("put it in the drawer")."""
+        tokens = parse.tokens
+        clause_of = _running_count(tokens, _TASK_BREAKS)
+        clauses: dict[int, list[tuple[int, str]]] = {}
+        for position, verb in parse.verb_at:
+            k = position - 1
+            while k >= 0 and tokens[k] in _CLAUSE_OPENERS and tokens[k] not in _TASK_BREAKS:
+                k -= 1
+            if k >= 0 and tokens[k] not in _TASK_BREAKS and tokens[k] not in _POLITE:
+                continue  # not a clause's verb ("the drawer is open", "a glass of water")
+            clauses.setdefault(clause_of[position], []).append((position, verb))
+        counted: list[tuple[str, set[str]]] = []
+        for clause, verbs in sorted(clauses.items()):
+            # the verbs that share the clause with this one: "set the bottle upright" is one phrasal verb
+            same = [v for p, v in parse.verb_at if clause_of[p] == clause]
+            chosen = [v for v in same if " " in v] or same
+            skills = {name for v in chosen for name in self._verbs[v]}
+            position = verbs[0][0]
+            stop = position + 1
+            while stop < len(tokens) and tokens[stop] not in _TASK_BREAKS:
+                stop += 1
+            if all(v.split()[0] in _GENERIC_VERBS for v in chosen) and not _DESTINATIONS & set(tokens[position:stop]):
+                continue
+            counted.append((chosen[0], skills))
+        for k, (verb, skills) in enumerate(counted):
+            for other, other_skills in counted[k + 1 :]:
+                if skills.isdisjoint(other_skills):
+                    raise SeveralTasksError(
+                        instruction,
+                        f"it asks for two tasks ('{verb}': {', '.join(sorted(skills))}; '{other}': "
+                        f"{', '.join(sorted(other_skills))}); a plan runs one skill, so give them one at a time",
+                    )
 
     # ---- step 0: positions and "one" ----------------------------------------------------------
 
@@ -311,10 +503,13 @@ class OfflineDecomposer:
         """ "two bowls, a red one and a blue one" -> "... a red bowl and a blue bowl": a modifier + "one"
         takes the noun last said with that modifier, else the noun last said."""
         words = list(words)
+        if "one" not in words and "ones" not in words:
+            return words
+        said = self._mentions(words, vocabulary)  # once: (index, noun, modifiers), not once per "one"
         for i, word in enumerate(words):
             if word not in ("one", "ones") or not i or words[i - 1] not in _MODIFIERS or words[i - 1] == "other":
                 continue
-            earlier = self._mentions(words[: i - 1], vocabulary)
+            earlier = [(noun, modifiers) for k, noun, modifiers in said if k < i - 1]
             if not earlier:
                 continue
             modifier = words[i - 1]
@@ -322,22 +517,22 @@ class OfflineDecomposer:
             same = [noun for noun, modifiers in earlier if modifier in modifiers]
             alike = [noun for noun, modifiers in earlier if modifiers & group]  # "the red block ... the blue one"
             words[i] = (same or alike or [earlier[-1][0]])[-1]
+            said = sorted([*said, (i, words[i], {modifier})])
         return words
 
-    def _mentions(self, words: Sequence[str], vocabulary: Sequence[str]) -> list[tuple[str, set[str]]]:
-        """(noun, modifiers said before it) for each object noun in `words`, in order."""
+    def _mentions(self, words: Sequence[str], vocabulary: Sequence[str]) -> list[tuple[int, str, set[str]]]:
+        """(index, noun, modifiers said before it) for each object noun in `words`, in order."""
+        words = list(words)
         out, i = [], 0
+        not_nouns = _BOUNDARY | _NON_OBJECTS | DETERMINERS | _MODIFIERS | self._single_verbs
         while i < len(words):
-            match = self._vocabulary_match(list(words), i, vocabulary)
+            match = self._vocabulary_match(words, i, vocabulary)
             length = len(match.split()) if match else 1
             if match is None:
                 previous = words[i - 1] if i else ""
                 word = words[i]
-                if not (
-                    (previous in DETERMINERS or previous in _MODIFIERS)
-                    and word.isalpha()
-                    and word not in _BOUNDARY | _NON_OBJECTS | DETERMINERS | _MODIFIERS.union(self._single_verbs)
-                ):
+                after_determiner = previous in DETERMINERS or previous in _MODIFIERS
+                if not (after_determiner and word.isalpha() and word not in not_nouns):
                     i += 1
                     continue
                 match = singular(word)
@@ -345,7 +540,7 @@ class OfflineDecomposer:
             while j >= 0 and words[j] in _MODIFIERS:
                 modifiers.add(words[j])
                 j -= 1
-            out.append((match, modifiers))
+            out.append((i, match, modifiers))
             i += length
         return out
 
@@ -368,7 +563,10 @@ class OfflineDecomposer:
             ):
                 start += 1  # "avoid knocking over the mug": the mug, not a "knocking mug"
             end = start
+            contrast = cue in _CONTRASTS  # "the red block, not the mug, into the drawer": one noun phrase
             while end < len(words) and not self._clause_ends(words, end):
+                if contrast and end > start and (words[end] == "," or words[end] in _DESTINATIONS | {"to"}):
+                    break
                 end += 1
             spans.append((start, end, " ".join(cue_words)))
             for j in range(i, start):
@@ -378,7 +576,13 @@ class OfflineDecomposer:
 
     @staticmethod
     def _cue_at(words: list[str], i: int, cue: tuple[str, ...]) -> bool:
-        return i + len(cue) <= len(words) and all(_matches(p, words[i + k]) for k, p in enumerate(cue))
+        if i + len(cue) > len(words):
+            return False
+        for k, pattern in enumerate(cue):
+            word = words[i + k]
+            if pattern != word and (pattern[0] != "<" or not _matches(pattern, word)):
+                return False
+        return True
 
     def _clause_ends(self, words: list[str], i: int) -> bool:
         word = words[i]
@@ -429,10 +633,26 @@ class OfflineDecomposer:
                     and not any(self._is_verb(words, m) for m in range(i + 2, k))
                 ):
                     spans.append((i + 2, k, i + 2, k, " ".join(words[i:k])))
+            elif words[i] in _PROPERTY_WORDS and self._said_of(words, i):
+                # "the glass is fragile", "the kettle is very hot": the object it is said of is an obstacle
+                k = i
+                while k > 0 and words[k - 1] in _DEGREE:
+                    k -= 1
+                start, end = self._subject_before(words, k)
+                if start < end:
+                    spans.append((start, end, start, i + 1, " ".join(words[start : i + 1])))
             elif words[i] == "alone" and "leave" in words[max(0, i - 8) : i]:
                 leave = max(k for k in range(max(0, i - 8), i) if words[k] == "leave")
                 spans.append((leave + 1, i, leave, i + 1, " ".join(words[leave : i + 1])))
         return spans
+
+    @staticmethod
+    def _said_of(words: list[str], i: int) -> bool:
+        """Whether the adjective words[i] is predicated ("is fragile", "are very hot"), not attributive."""
+        k = i - 1
+        while k >= 0 and words[k] in _DEGREE:
+            k -= 1
+        return k >= 0 and (words[k] in _COPULAS or words[k] in ("looks", "seems", "look", "seem", "all", "both"))
 
     def _obstacle_predicate(self, words: list[str], i: int) -> tuple[int, int, int, int, str] | None:
         """ "the lamp counts as an obstacle", "treat the lamp as an obstacle", "obstacles: the mug and the
@@ -461,11 +681,13 @@ class OfflineDecomposer:
     def _subject_before(self, words: list[str], i: int, plural: bool = False) -> tuple[int, int]:
         """The noun phrase (or list, after a plural verb) that ends before words[i], skipping a copula."""
         j = i
-        while j > 0 and words[j - 1] in _COPULAS | _STANCE | {"also", "still", "currently", "right", "now", "just"}:
+        while j > 0 and words[j - 1] in _COPULAS | _STANCE | _DEGREE | _SUBJECT_SKIPS:
             plural |= words[j - 1] in _PLURAL_COPULAS
             j -= 1
         end = start = j
         while start > 0 and words[start - 1] not in _SUBJECT_STOPS and not self._is_verb(words, start - 1):
+            if start < end and words[start] in DETERMINERS and words[start - 1] not in _LIST_SEPARATORS:
+                break  # "open the drawer the lamp counts as ...": a noun phrase starts at its determiner
             if words[start - 1] in _LIST_SEPARATORS:
                 k = start - 1
                 while k > 0 and words[k - 1] not in _SUBJECT_STOPS and words[k - 1] not in _LIST_SEPARATORS:
@@ -504,6 +726,10 @@ class OfflineDecomposer:
                 chunk.append(word)
 
     def _read_chunk(self, chunk: list[str], index: int, cue: str, parse: Parse) -> None:
+        if chunk and chunk[0] in _QUANTIFIED and "of" in chunk[1:4]:
+            rest = chunk[1 : chunk.index("of", 1)]
+            if all(w in ("one", "single", "last", "single one") for w in rest):
+                chunk = chunk[chunk.index("of", 1) + 1 :]  # "any of them", "every one of them", "all of the cups"
         content = tuple(w for w in chunk if w not in _POLITE or w in ("it", "one"))
         bare = tuple(w for w in content if w not in ("very", "just", "also", "either", "any"))
         while len(bare) > 1 and bare[-1] in ("over", "off", "down", "up", "away", "around"):
@@ -515,6 +741,7 @@ class OfflineDecomposer:
         if ref is not None:
             parse.obstacles.append(ref)
             parse.declared.append((index, ref))
+            parse.cue_of.setdefault(ref, cue)
             return
         said = [w for w in chunk if w not in DETERMINERS and w not in _PARTICLES and w not in _POLITE]
         if said:
@@ -529,9 +756,21 @@ class OfflineDecomposer:
         nouns: list[str] = []
         previous = ""
         vague = False  # "the thing next to the pan": a head that names no object ends the phrase too
-        for word in chunk:
+        for k, word in enumerate(chunk):
             after_determiner = previous in DETERMINERS or previous in COLOURS or previous in SIZE_WORDS
             previous = word
+            following = chunk[k + 1] if k + 1 < len(chunk) else ","
+            if word == "can" and nouns and following not in ("be", "you", "i", "we", "not", "now"):
+                nouns.append(word)  # "the tin can", "the soda can": a noun after a noun
+                continue
+            if word in _COMPOUND_MODIFIERS and not nouns and following not in _BOUNDARY | _NON_OBJECTS | _SENTENCE_END:
+                nouns.append(word)  # "the water bottle", "the table lamp"
+                continue
+            if nouns and (word in _STANCE or word.endswith("ing") and len(word) > 4):
+                break  # "the phone case lying next to it": a participle ends the noun phrase
+            if nouns and word in _DETACHABLE:
+                nouns.append(word)  # "the pan lid": a lid is an object of its own, not the pan
+                continue
             # A function word straight after "the" is a noun after all ("the can").
             if word in _BOUNDARY and not after_determiner:
                 if nouns or vague:
@@ -539,6 +778,8 @@ class OfflineDecomposer:
                 continue
             if word in DETERMINERS:
                 continue
+            if not nouns and not after_determiner and len(word) > 5 and word.endswith("ly"):
+                continue  # "especially the vase", "particularly the lamp": an adverb before the phrase
             if word in POSITION_WORDS and not nouns and (word != "middle" or after_determiner):
                 position = POSITION_WORDS[word]
             elif word in COLOURS:
@@ -549,7 +790,8 @@ class OfflineDecomposer:
                 nouns.append(word)
             elif word not in POSITION_WORDS:
                 vague = True  # "anything else": nothing after a vague head is its noun
-        if not nouns:
+        nouns = nouns[-_MAX_COMPOUND:]  # "the a b c d e f": no object's name is a run of words
+        if not nouns or len(" ".join(nouns)) > MAX_NAME_CHARS:
             return None
         nouns[-1] = singular(nouns[-1])
         return ObjectRef(name=" ".join(nouns), color=color, size=size, position=position)
@@ -563,17 +805,25 @@ class OfflineDecomposer:
             heads = {v for v in self._phrasal if v[0] in lemmas(word)}
             if not hits and not heads:
                 continue
-            # A lexicon word right after a determiner or adjective is a noun ("the water", "the base").
+            # A lexicon word right after a determiner or adjective is a noun ("the water", "the base"); after a
+            # copula it is a state ("the drawer is open"); "close to" / "close by" is a place, not the verb.
             previous = task[i - 1] if i else ","
-            if previous in DETERMINERS or previous in COLOURS or previous in POSITION_WORDS:
+            if previous in DETERMINERS or previous in COLOURS or previous in POSITION_WORDS or previous in _COPULAS:
                 continue
+            following = task[i + 1] if i + 1 < len(task) else ","
+            if word == "close" and (following in ("to", "by", "beside", "behind", "next") or previous in _DEGREE):
+                continue
+            if word == "right" and following in _RIGHT_AS_ADVERB_BEFORE:
+                continue  # "a vase right next to the drawer", "right there": an adverb, not "right the bottle"
             if hits:
                 parse.verbs.append(sorted(hits)[0])
+                parse.verb_at.append((i, sorted(hits)[0]))
                 positions.add(i)
             for verb in sorted(heads):
                 particle = self._particle_after(task, i, verb[1:])
                 if particle is not None:
                     parse.verbs.append(" ".join(verb))
+                    parse.verb_at.append((i, " ".join(verb)))
                     positions.update({i, particle})
         content = [w for w in task if w not in _POLITE and w not in _SENTENCE_END and w != ","]
         head = []
@@ -605,12 +855,14 @@ class OfflineDecomposer:
                 continue
             end = i + len(match.split())
             color, size, position = self._modifiers(task, i)
-            nouns.append(_Noun(match, color, size, known=True, index=i, position=position))
+            nouns.append(_Noun(match, color, size, known=True, index=i, end=end, position=position))
             used.update(range(i, end))
             i = end
-        # Unknown head nouns after a determiner ("the stapler") fill wildcard slots.
+        # Unknown head nouns after a determiner ("the stapler"), or right after the verb ("put teapots in the
+        # drawer"), fill wildcard slots.
         for i, word in enumerate(task):
-            if word not in DETERMINERS:
+            after_verb = i in verb_positions and i + 1 < len(task) and task[i + 1] not in DETERMINERS | _MODIFIERS
+            if word not in DETERMINERS and not after_verb:
                 continue
             chunk = []
             for j in range(i + 1, len(task)):
@@ -622,23 +874,25 @@ class OfflineDecomposer:
                     break
                 chunk.append(j)
             if chunk and not used & set(chunk):
-                ref = self._chunk_to_ref([word, *(task[j] for j in chunk)])
+                ref = self._chunk_to_ref([*([] if after_verb else [word]), *(task[j] for j in chunk)])
                 if ref is not None:
                     name = self._matcher_noun(ref.name, vocabulary) or ref.name
                     nouns.append(
-                        _Noun(name, ref.color, ref.size, known=name != ref.name, index=chunk[0], position=ref.position)
+                        _Noun(name, ref.color, ref.size, known=name != ref.name, index=chunk[0], end=chunk[-1] + 1,
+                              position=ref.position)
                     )
                     used.update(chunk)
         return sorted(nouns, key=lambda n: n.index)
 
     @staticmethod
     def _vocabulary_match(task: list[str], i: int, vocabulary: Sequence[str]) -> str | None:
-        for entry in vocabulary:
+        multi, single = _vocabulary_index(tuple(vocabulary))
+        for entry in multi.get(task[i], ()):
             parts = entry.split()
             window = task[i : i + len(parts)]
             if len(window) == len(parts) and window[:-1] == parts[:-1] and parts[-1] in lemmas(window[-1]):
                 return entry
-        return None
+        return next((entry for entry in single if entry in lemmas(task[i])), None)
 
     @staticmethod
     def _modifiers(task: list[str], i: int) -> tuple[str | None, str | None, str | None]:
@@ -668,6 +922,8 @@ class OfflineDecomposer:
         phrasal_skills = {name for verb in parse.verbs if " " in verb for name in self._verbs[verb]}
         if not verb_skills and self.matcher is not None and parse.verb_phrase:
             verb_skills = self._matcher_skills(parse.verb_phrase)
+        if not verb_skills:
+            self._refuse_without_verb(instruction, parse)
         evidence: dict[str, float] = {}
         for skill in self.registry:
             score = 2.0 if skill.name in verb_skills else 0.0
@@ -692,6 +948,27 @@ class OfflineDecomposer:
                 instruction, f"it fits '{best.name}' and '{ranked[1].name}' equally; name the objects"
             )
         return best
+
+    def _refuse_without_verb(self, instruction: str, parse: Parse) -> None:
+        """No task verb: a negated command, or a verb no skill is asked for with (never planned from nouns)."""
+        if parse.negated:
+            raise NegatedCommandError(
+                instruction, f"'{parse.negated[0]}' asks the robot not to do something, and nothing else is asked"
+            )
+        word = parse.verb_phrase.split()[0] if parse.verb_phrase else None
+        examples = ", ".join(dict.fromkeys(s.verbs[0] for s in self.registry))
+        if word is None:
+            raise UnknownVerbError(
+                instruction,
+                f"no skill fits: it has no verb that asks for a task (skills are asked for with: {examples})",
+            )
+        guess = spelling.suggest(word, sorted(self._single_verbs))
+        hint = f"; did you mean '{guess}'?" if guess else ""
+        raise UnknownVerbError(
+            instruction,
+            f"no skill fits: '{word}' is not a verb any skill is asked for with{hint} (skills are asked for with: "
+            f"{examples})",
+        )
 
     def _check_fit(self, instruction: str, skill: SkillSpec, parse: Parse) -> None:
         """Refuse a reading that would silently drop or swap an object the user asked to act on: "pour the
@@ -746,8 +1023,12 @@ class OfflineDecomposer:
         assigned: dict[int, tuple[_Noun, bool]] = {}
         free = sorted(nouns, key=lambda n: not n.in_task)  # "there are two bowls. pour the red one ..."
         for k, slot in enumerate(skill.slots):
-            noun = next((n for n in free if _exact(slot, n.name)), None) or next(
-                (n for n in free if slot.matches(n.name)), None
+            # A landmark ("past the block", "next to the drawer") fills a slot only when nothing else can: for the
+            # item slot, any other noun said as the object can ("move the teapot past the block").
+            plain = [n for n in free if not n.landmark]
+            landmarks = [] if slot.accepts_any else [n for n in free if n.landmark]
+            noun = next((n for n in plain if _exact(slot, n.name)), None) or next(
+                (n for n in [*plain, *landmarks] if slot.matches(n.name)), None
             )
             if noun is not None:
                 assigned[k] = (noun, False)
@@ -755,8 +1036,17 @@ class OfflineDecomposer:
         for k, slot in enumerate(skill.slots):
             if k in assigned or not slot.accepts_any:
                 continue
-            noun = next((n for n in free if not any(s.matches(n.name) for s in skill.slots)), None)
+            # The object of the verb, not a landmark, a destination or a source ("put the block next to the vase
+            # in the drawer"), and not an object the registry knows for another slot.
+            unplaced = [n for n in free if not any(s.matches(n.name) for s in skill.slots)]
+            plain = [n for n in unplaced if not (n.landmark or n.destination or n.source)]
+            noun = next(iter(plain or unplaced), None)
             if noun is None:
+                noun = next((n for n in free if slot.matches(n.name)), None)  # only a landmark names it
+                if noun is not None:
+                    assigned[k] = (noun, False)
+                    free.remove(noun)
+                    continue
                 noun = next(iter(free), None)
             if noun is not None:
                 assigned[k] = (noun, True)
@@ -780,11 +1070,16 @@ class OfflineDecomposer:
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)
             declared_before = [k for k, _ in parse.declared if k < reference.index]
-            targets_before = [t.index for t in targets if t.index < reference.index]
-            if not others and declared_before and max(declared_before) > max(targets_before, default=-1):
+            if not others and declared_before:
                 continue  # "the plate is in the way, so go around it": an obstacle already
             if not others:
                 named = [t for t in sorted(targets, key=lambda t: t.index) if t.index < reference.index]
+                if named and not _is_care(reference.text):
+                    raise ContradictionError(
+                        instruction,
+                        f"'{reference.text}' can only mean what {skill.name} acts on "
+                        f"({', '.join(t.ref().phrase for t in named)}); say which object to keep away from",
+                    )
                 if named:
                     parse.warnings.append(
                         f"'{reference.text}' can only mean a target ({', '.join(t.ref().phrase for t in named)}); "
@@ -821,7 +1116,8 @@ class OfflineDecomposer:
 
     # ---- step 4: slots and scene ------------------------------------------------------------
 
-    def _fill_slots(self, skill: SkillSpec, nouns: list[_Noun]) -> list[ObjectRef]:
+    def _fill_slots(self, skill: SkillSpec, nouns: list[_Noun]) -> tuple[list[ObjectRef], list[_Noun]]:
+        """The targets in slot order (a slot nothing fills takes its word), and the nouns that filled slots."""
         assigned, _ = self._assign(skill, nouns)
         targets = []
         for k, slot in enumerate(skill.slots):
@@ -831,50 +1127,97 @@ class OfflineDecomposer:
             noun, wildcard = assigned[k]
             keep_own_name = wildcard or (slot.accepts_any and not _exact(slot, noun.name))
             targets.append(noun.ref(None if keep_own_name else slot.word))
-        return targets
+        return targets, [noun for noun, _ in assigned.values()]
 
     @staticmethod
-    def _drop_targets(skill: SkillSpec, targets: list[ObjectRef], parse: Parse) -> list[ObjectRef]:
-        """Obstacles without those that are a target ("pour the bowl into the pan, don't spill the bowl")."""
+    def _drop_targets(instruction: str, skill: SkillSpec, targets: list[ObjectRef], parse: Parse) -> list[ObjectRef]:
+        """Obstacles without those that are a target. Care said of a target ("pour the bowl into the pan, don't
+        spill the bowl", "the bowl is hot") is kept as a warning; distance from it ("without touching the
+        bottle", "avoid the bowl") is a contradiction, refused."""
         kept = []
         for obstacle in parse.obstacles:
             same = [
                 t
                 for slot, t in zip(skill.slots, targets, strict=True)
-                if (slot.matches(obstacle.name) and slot.matches(t.name) or obstacle.name == t.name)
+                if (_exact(slot, obstacle.name) and slot.matches(t.name) or obstacle.name == t.name)
                 and obstacle.position != "other"
                 and all(getattr(obstacle, a) in (None, getattr(t, a)) for a in ("color", "size", "position"))
             ]
-            if same:
-                parse.warnings.append(
-                    f"'{obstacle.phrase}' is said to be avoided but is the target {same[0].phrase} of "
-                    f"{skill.name}; it is not made an obstacle"
-                )
-            else:
+            if not same:
                 kept.append(obstacle)
+                continue
+            cue = parse.cue_of.get(obstacle, "")
+            if not _is_care(cue):
+                raise ContradictionError(
+                    instruction,
+                    f"'{same[0].phrase}' is the object {skill.name} acts on, and '{cue or 'avoid'}' says to keep "
+                    f"away from it; say which it is",
+                )
+            parse.warnings.append(
+                f"'{obstacle.phrase}' is said to be handled with care ('{cue}') and is the target {same[0].phrase} of "
+                f"{skill.name}; it is not made an obstacle"
+            )
         return kept
 
-    def _ground_in_scene(self, plan: TaskPlan, skill: SkillSpec, scene_objects: SceneObjects) -> TaskPlan:
-        """Rename targets and obstacles to scene kinds where the words differ but mean the same."""
-        objects = scene_vocabulary(scene_objects)
-        kinds = list(dict.fromkeys(" ".join(o.kind) for o in objects))
 
-        def ground(ref: ObjectRef, slot: Slot | None, role: str) -> ObjectRef:
-            if resolve_phrase(ref.phrase, objects):
-                return ref
-            options = [k for k in kinds if slot is not None and slot.matches(k)]
-            if not options and self.matcher is not None:
-                index, similarity = self.matcher.best_match(ref.name, kinds)
-                options = [kinds[index]] if similarity >= self.match_threshold else []
-            for kind in options:
-                candidate = ref.model_copy(update={"name": kind})
-                if resolve_phrase(candidate.phrase, objects):
-                    return candidate
-            raise UnknownObjectError(ref.phrase, [o.name for o in objects], role)
+def _is_care(cue: str) -> bool:
+    return any(lemmas(word) & _CARE_WORDS for word in cue.split())
 
-        targets = [ground(t, slot, "target") for t, slot in zip(plan.targets, skill.slots, strict=True)]
-        obstacles = [ground(o, None, "obstacle") for o in plan.obstacles]
-        return plan.model_copy(update={"targets": targets, "obstacles": obstacles})
+
+_QUESTION_WORDS = frozenset("is are was were do does did where what why when who which how has have am".split())
+
+
+def _refuse_question(instruction: str, parse: Parse) -> None:
+    """ "is the drawer open?", "where did you put the phone?": a question asks for an answer, not a task. A
+    request put as a question ("could you put the block in the drawer?") is a task."""
+    tokens = parse.tokens
+    for position, _ in parse.verb_at[:1]:
+        start = max((k + 1 for k in range(position) if tokens[k] in _SENTENCE_END), default=0)
+        end = next((k for k in range(position, len(tokens)) if tokens[k] in _SENTENCE_END), len(tokens))
+        if end < len(tokens) and tokens[end] == "?" and tokens[start] in _QUESTION_WORDS:
+            raise InstructionNotUnderstoodError(instruction, "it is a question, not a task; say what to do")
+
+
+def _check_obstacle_count(instruction: str, obstacles: Sequence[ObjectRef]) -> None:
+    count = len(set(obstacles))
+    if count > MAX_OBSTACLES:
+        raise InstructionNotUnderstoodError(
+            instruction, f"it names {count} objects to keep away from; at most {MAX_OBSTACLES} are accepted"
+        )
+
+
+def _with_shared_synonyms(registry: SkillRegistry) -> SkillRegistry:
+    """The registry with each slot's synonyms shared by every slot of the same word: a "flask" is a bottle in
+    open_wine_bottle too, since bottle_in_drawer says so ("open the flask")."""
+    shared: dict[str, tuple[str, ...]] = {}
+    for skill in registry:
+        for slot in skill.slots:
+            shared[slot.word] = tuple(dict.fromkeys([*shared.get(slot.word, ()), *slot.synonyms]))
+    return SkillRegistry(
+        skill.model_copy(
+            update={"slots": tuple(slot.model_copy(update={"synonyms": shared[slot.word]}) for slot in skill.slots)}
+        )
+        for skill in registry
+    )  # fmt: skip
+
+
+def _running_count(words: Sequence[str], marks) -> list[int]:
+    """For each token, how many of `marks` come before it (the sentence or clause it is in)."""
+    counts, seen = [], 0
+    for word in words:
+        counts.append(seen)
+        seen += word in marks
+    return counts
+
+
+@functools.lru_cache(maxsize=64)
+def _vocabulary_index(vocabulary: tuple[str, ...]) -> tuple[dict[str, list[str]], list[str]]:
+    """Multi-word entries by their first word (longest first), and the single words in `vocabulary` order: a
+    lookup per token instead of a scan of the vocabulary (bounded time on a 1,000-character instruction)."""
+    multi: dict[str, list[str]] = {}
+    for entry in sorted((e for e in vocabulary if " " in e), key=lambda e: -len(e.split())):
+        multi.setdefault(entry.split()[0], []).append(entry)
+    return multi, [e for e in vocabulary if " " not in e]
 
 
 def _exact(slot: Slot, noun: str) -> bool:

@@ -165,7 +165,24 @@ class SkillRegistry:
 
     @classmethod
     def load(cls, path: str | Path) -> SkillRegistry:
-        return cls.from_json(Path(path).read_text())
+        """A registry JSON file; one that is not one (not JSON, a skill that does not validate) is a
+        CorruptFileError naming the file."""
+        from lano3dp.errors import CorruptFileError
+
+        text = Path(path).read_text()
+        try:
+            return cls.from_json(text)
+        except (ValueError, TypeError) as error:  # JSONDecodeError and pydantic's ValidationError are ValueErrors
+            if not text.strip():
+                what = "the file is empty"
+            elif callable(getattr(error, "errors", None)):  # pydantic: the first problem, not a page of them
+                problems = error.errors()
+                first = problems[0]
+                what = f"{'.'.join(map(str, first['loc'])) or 'entry'}: {first['msg']}" + \
+                    (f" (and {len(problems) - 1} more)" if len(problems) > 1 else "")
+            else:
+                what = f"{type(error).__name__}: {error}"
+            raise CorruptFileError(path, f"not a skill registry ({what})") from None
 
 
 # What a caller may pass as "the scene": object names ("red_bowl", "pan"), a name -> attributes

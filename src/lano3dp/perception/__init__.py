@@ -5,6 +5,7 @@ source are imported from their modules on demand.
 """
 
 from lano3dp.perception.base import InstanceSegmenter, MaskResult, Segmenter
+from lano3dp.perception.error_model import ErrorModelSegmenter, PerceptionErrorModel
 from lano3dp.perception.exceptions import (
     AmbiguousObjectError,
     MissingWeightsError,
@@ -20,6 +21,7 @@ from lano3dp.vocabulary import resolve_phrase
 
 __all__ = [
     "AmbiguousObjectError",
+    "ErrorModelSegmenter",
     "InstanceSegmenter",
     "MaskPerturbation",
     "MaskResult",
@@ -28,6 +30,7 @@ __all__ = [
     "ObjectNotFoundError",
     "ObjectObserver",
     "PerceptionError",
+    "PerceptionErrorModel",
     "PerturbedSegmenter",
     "Segmenter",
     "SegmenterConfig",

@@ -49,17 +49,7 @@ class SimOracleSegmenter:
 
     @staticmethod
     def _scene(frame: RGBDFrame) -> tuple[list[SceneObject], dict[str, np.ndarray]]:
-        if frame.segmentation is None:
-            raise ValueError("SimOracleSegmenter needs frame.segmentation (simulator ground truth); got none")
-        objects = [
-            SceneObject.from_frame_entry(name, frame.instance_attributes.get(name))
-            for name in sorted(frame.instance_names)
-        ]
-        masks = {
-            name: np.isin(frame.segmentation, np.asarray(ids, dtype=np.int64))
-            for name, ids in frame.instance_names.items()
-        }
-        return objects, masks
+        return scene_objects(frame)
 
     def segment_instances(self, frame: RGBDFrame, phrase: str) -> list[MaskResult]:
         """Every visible object `phrase` can mean, by name (obstacles: "avoid the cups" means all of them)."""
@@ -70,8 +60,10 @@ class SimOracleSegmenter:
             if masks[name].any()
         ]
 
-    def segment(self, frame: RGBDFrame, phrases: Sequence[str]) -> list[MaskResult]:
-        objects, masks = self._scene(frame)
+    def segment(self, frame: RGBDFrame, phrases: Sequence[str],
+                scene: tuple[list[SceneObject], dict[str, np.ndarray]] | None = None) -> list[MaskResult]:
+        """One result per phrase; `scene` is `scene_objects(frame)` when the caller already has it."""
+        objects, masks = scene if scene is not None else self._scene(frame)
         visible = tuple(name for name in sorted(masks) if masks[name].any())
         results = []
         for phrase in phrases:
@@ -89,3 +81,18 @@ class SimOracleSegmenter:
             else:
                 results.append(MaskResult(phrase, masks[name], 1.0, True, name))
         return results
+
+
+def scene_objects(frame: RGBDFrame) -> tuple[list[SceneObject], dict[str, np.ndarray]]:
+    """The frame's objects in words (sorted by name) and each one's (H, W) bool ground-truth mask."""
+    if frame.segmentation is None:
+        raise ValueError("SimOracleSegmenter needs frame.segmentation (simulator ground truth); got none")
+    objects = [
+        SceneObject.from_frame_entry(name, frame.instance_attributes.get(name))
+        for name in sorted(frame.instance_names)
+    ]
+    masks = {
+        name: np.isin(frame.segmentation, np.asarray(ids, dtype=np.int64))
+        for name, ids in frame.instance_names.items()
+    }
+    return objects, masks

@@ -149,8 +149,8 @@ class TrackingSegmenter:
     targets and then its obstacles on the same frame tracks that frame once (the result is cached
     for the frame object) instead of restarting. The first frame, a frame that brings new phrases,
     and a frame where any tracked object is lost go through `initial` (e.g. `OpenVocabSegmenter`)
-    for all session phrases, and the tracker restarts from those masks. Call `reset()` between
-    episodes.
+    for all session phrases, and the tracker restarts from those masks. Each episode starts afresh
+    (`start_episode`, which the runner calls).
     """
 
     def __init__(self, initial: Segmenter, tracker: VideoTracker):
@@ -160,6 +160,10 @@ class TrackingSegmenter:
         self._last_frame: RGBDFrame | None = None
         self._last: dict[str, MaskResult] = {}
         self.redetections = 0
+
+    def start_episode(self, seed: int) -> None:
+        """Forget the last episode's objects (the runner calls it at every episode's start)."""
+        self.reset()
 
     def reset(self) -> None:
         self.tracker.reset()

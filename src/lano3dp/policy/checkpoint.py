@@ -27,8 +27,9 @@ from typing import Any
 import torch
 from torch import nn
 
-from lano3dp.errors import CorruptFileError
-from lano3dp.jsonio import to_jsonable
+from lano3dp.errors import CorruptFileError, StorageError, describe_os_error
+from lano3dp.jsonio import discard, to_jsonable, write_text_atomic
+from lano3dp.policy.integrity import MANIFEST_NAME, verify_checkpoint
 from lano3dp.policy.modeling import load_safetensors, save_safetensors
 
 STATE_TENSORS = "training_state.safetensors"
@@ -124,7 +125,7 @@ def save_training_state(directory: Path, *, step: int, model: nn.Module, optimiz
     save_safetensors(tensors, directory / STATE_TENSORS, metadata={"format": "lano3dp-training-state"})
     meta = {"step": step, "optimizer": optimizer_meta, "lr_scheduler": lr_scheduler.state_dict(),
             "ema": ema.state() if ema is not None else None, "extra": extra or {}}
-    (directory / STATE_JSON).write_text(json.dumps(to_jsonable(meta, finite=False), indent=2))
+    write_text_atomic(directory / STATE_JSON, json.dumps(to_jsonable(meta, finite=False), indent=2))
 
 
 def load_training_state(directory: str | Path) -> TrainingState:
@@ -153,7 +154,12 @@ def load_training_state(directory: str | Path) -> TrainingState:
 # ---- folders ----------------------------------------------------------------------------------
 @contextmanager
 def atomic_directory(final: Path) -> Iterator[Path]:
-    """Yield a temporary sibling folder; on success it replaces `final` in one rename."""
+    """Yield a temporary sibling folder; on success it replaces `final` in one rename.
+
+    Before the rename its policy files are read back against the manifest they were sealed with (a full disk
+    that cut a file short is found here, not at the next load); any failure removes the temporary folder and
+    leaves `final` as it was.
+    """
     final = Path(final)
     temporary = final.with_name(f".{final.name}.tmp-{os.getpid()}")
     shutil.rmtree(temporary, ignore_errors=True)
@@ -161,6 +167,12 @@ def atomic_directory(final: Path) -> Iterator[Path]:
     try:
         yield temporary
         _fsync_tree(temporary)
+        if (temporary / MANIFEST_NAME).exists():
+            try:
+                verify_checkpoint(temporary)
+            except CorruptFileError as error:
+                raise StorageError(error.path, "it does not read back as written "
+                                               f"({error.reason.split(';')[0]})") from error
         if final.exists():  # os.replace cannot replace a non-empty folder: move it aside first
             old = final.with_name(f".{final.name}.old-{os.getpid()}")
             os.replace(final, old)
@@ -168,6 +180,9 @@ def atomic_directory(final: Path) -> Iterator[Path]:
             shutil.rmtree(old, ignore_errors=True)
         else:
             os.replace(temporary, final)
+    except StorageError as error:  # named by the checkpoint it was for, not the hidden folder it was written in
+        shutil.rmtree(temporary, ignore_errors=True)
+        raise StorageError(error.path.replace(str(temporary), str(final)), error.cause) from error
     except BaseException:
         shutil.rmtree(temporary, ignore_errors=True)
         raise
@@ -184,10 +199,14 @@ def update_last_pointer(checkpoints: Path, name: str) -> Path:
     """Point `checkpoints/last` at `checkpoints/<name>` (relative symlink, swapped atomically)."""
     link = checkpoints / "last"
     temporary = checkpoints / f".last.tmp-{os.getpid()}"
-    if temporary.is_symlink() or temporary.exists():
-        temporary.unlink()
-    os.symlink(name, temporary)
-    os.replace(temporary, link)
+    try:
+        if temporary.is_symlink() or temporary.exists():
+            temporary.unlink()
+        os.symlink(name, temporary)
+        os.replace(temporary, link)
+    except OSError as error:
+        discard(temporary)
+        raise StorageError(link, describe_os_error(error)) from error
     return link
 
 
@@ -212,11 +231,13 @@ def latest_resumable(checkpoints: Path) -> Path | None:
 
 
 def remove_stale_temporaries(checkpoints: Path) -> None:
-    """Delete leftovers of a run killed while writing (hidden .step_*.tmp-* / .old-* folders)."""
+    """Delete leftovers of a run killed while writing (hidden .step_*.tmp-* / .old-* folders, .last.tmp-* links)."""
     if checkpoints.is_dir():
         for path in checkpoints.iterdir():
             if path.name.startswith(".step_") and (".tmp-" in path.name or ".old-" in path.name):
                 shutil.rmtree(path, ignore_errors=True)
+            elif path.name.startswith(".last.tmp-") and path.is_symlink():
+                path.unlink(missing_ok=True)
 
 
 def prune_training_states(checkpoints: Path, keep: int) -> None:

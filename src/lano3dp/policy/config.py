@@ -69,6 +69,9 @@ class PolicyConfig:
             its points reach farther towards): the principal axis cannot tell a broom's head from its handle. It
             did not lift the broom's success (README, "Learning efficiency"), so it is opt-in (needs
             object_pose_features).
+        task_inputs: low-dimensional inputs the env hands over as obs[key] beside the state, {key: length}, e.g.
+            {"goal": 3} for a goal position that renders nothing; each key is a registered task-input type
+            (`policy.observations.vector`). Read off the dataset by training; empty for a policy without.
         extra: free-form notes the model does not use. extra["observation"] says how the training observations
             were made (camera, crop box, points, control_hz and, when not 1, time_stride: recorded steps between
             consecutive window steps; see `time_stride`), so a checkpoint acts without its dataset.
@@ -101,12 +104,14 @@ class PolicyConfig:
     action_frame: str = "absolute"
     object_pose_features: bool = False
     object_pose_skew: bool = False
+    task_inputs: dict[str, int] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)  # free-form notes (dataset, skill), not used by the model
 
     def __post_init__(self):
         self.object_names = tuple(self.object_names)
         self.down_dims = tuple(int(d) for d in self.down_dims)
         self.point_hidden_dims = tuple(int(d) for d in self.point_hidden_dims)
+        self.task_inputs = {str(key): int(length) for key, length in dict(self.task_inputs).items()}
         self.validate()
 
     def validate(self) -> None:
@@ -125,10 +130,22 @@ class PolicyConfig:
         need(self.action_frame in ACTION_FRAMES,
              f"action_frame must be one of {ACTION_FRAMES}, got {self.action_frame!r}")
         need(self.object_pose_features or not self.object_pose_skew, "object_pose_skew needs object_pose_features")
+        need(observation.source == "frame", f"obs_type {self.obs_type!r} is a task input (obs[{observation.key!r}]), "
+                                            "not a visual input; give it in task_inputs")
         try:
             observation.validate(self)
         except ValueError as error:
             raise ValueError(f"PolicyConfig: {error}") from None
+        from lano3dp.policy.observations import get_observation_type
+
+        for key, length in self.task_inputs.items():
+            try:
+                task_input = get_observation_type(key)
+            except ValueError as error:
+                raise ValueError(f"PolicyConfig: task_inputs: {error}") from None
+            need(task_input.source == "obs", f"task_inputs: {key!r} is a visual input (obs_type), not one the env "
+                                             "hands over as obs[key]")
+            need(length >= 1, f"task_inputs: {key!r} needs a length >= 1, got {length}")
         for name in ("n_points", "scene_points", "image_size", "state_dim", "action_dim", "n_obs_steps", "horizon",
                      "n_action_steps", "diffusion_step_embed_dim", "kernel_size", "n_groups", "encoder_out",
                      "state_feature_dim", "num_train_timesteps"):
@@ -162,19 +179,26 @@ class PolicyConfig:
 
         return get_observation_type(self.obs_type)
 
+    def task_input_type(self, key: str) -> ObservationType:
+        """The registered task-input type of `key` (`policy.observations.vector`)."""
+        from lano3dp.policy.observations import get_observation_type
+
+        return get_observation_type(key)
+
     @property
     def visual_key(self) -> str:
         """The dataset / observation key of the visual input ("object_clouds", "scene_cloud", "rgb", ...)."""
         return self.observation.key
 
     @property
-    def obs_keys(self) -> tuple[str, str]:
-        return (self.visual_key, "state")
+    def obs_keys(self) -> tuple[str, ...]:
+        """The keys of one observation step: the visual input, the state, then the task inputs."""
+        return (self.visual_key, "state", *self.task_inputs)
 
     @property
     def time_stride(self) -> int:
         """Env steps one policy step spans: the recorded steps between consecutive steps of the training windows
-        (extra["observation"]["time_stride"]; 1, every recorded step, when absent)."""
+        (`extra["observation"]["time_stride"]`; 1, every recorded step, when absent)."""
         return int((self.extra.get("observation") or {}).get("time_stride", 1))
 
     @property
@@ -196,9 +220,7 @@ class PolicyConfig:
         unknown = sorted(set(data) - known)
         if unknown:
             raise ValueError(f"PolicyConfig: unknown fields {unknown}")
-        # configs written before these fields existed predicted world positions without pose features,
-        # whatever today's defaults are
-        return cls(**({"action_frame": "absolute", "object_pose_features": False, "object_pose_skew": False} | data))
+        return cls(**data)
 
     def to_json(self) -> str:
         return json.dumps(self.to_dict(), indent=2, sort_keys=True)

@@ -216,7 +216,7 @@ class ImageEncoder(nn.Module):
     def forward(self, rgb: torch.Tensor) -> torch.Tensor:
         if rgb.ndim != 4 or rgb.shape[-1] != 3:
             raise ValueError(f"rgb must be (batch, height, width, 3), got {tuple(rgb.shape)}")
-        image = rgb.permute(0, 3, 1, 2).float() / 127.5 - 1.0
+        image = rgb.permute(0, 3, 1, 2).to(self.stem[0].weight.dtype) / 127.5 - 1.0
         return self.head(self.pool(self.blocks(self.stem(image))))
 
 
@@ -236,7 +236,8 @@ class StateEncoder(nn.Module):
 class ObservationEncoder(nn.Module):
     """Normalised observation window -> the UNet's global condition.
 
-    obs {visual_key: (B, To, ...), "state": (B, To, state_dim)} -> (B, To * (visual + state features)).
+    obs {visual_key: (B, To, ...), "state": (B, To, state_dim), each task input: (B, To, D)} -> (B, To * (visual +
+    state + task-input features)).
     """
 
     def __init__(self, config: PolicyConfig):
@@ -245,7 +246,10 @@ class ObservationEncoder(nn.Module):
         self.n_obs_steps = config.n_obs_steps
         self.visual = config.observation.encoder(config)  # the obs_type's own module builds it
         self.state = StateEncoder(config)
-        self.step_dim = self.visual.out_dim + self.state.out_dim
+        # no parameters when the policy has none: checkpoints without task inputs keep their keys
+        self.task_inputs = nn.ModuleDict({key: config.task_input_type(key).encoder(config)
+                                          for key in config.task_inputs})
+        self.step_dim = self.visual.out_dim + self.state.out_dim + sum(m.out_dim for m in self.task_inputs.values())
         self.out_dim = self.step_dim * config.n_obs_steps
 
     def forward(self, obs: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -254,5 +258,11 @@ class ObservationEncoder(nn.Module):
         if visual.shape[:2] != (batch, steps) or steps != self.n_obs_steps:
             raise ValueError(f"observation windows must be (batch, n_obs_steps={self.n_obs_steps}, ...); got "
                              f"{self.visual_key} {tuple(visual.shape)} and state {tuple(state.shape)}")
-        features = torch.cat([self.visual(visual.flatten(0, 1)), self.state(state.flatten(0, 1))], dim=-1)
-        return features.reshape(batch, steps * self.step_dim)
+        features = [self.visual(visual.flatten(0, 1)), self.state(state.flatten(0, 1))]
+        for key, encoder in self.task_inputs.items():
+            value = obs[key]
+            if value.shape[:2] != (batch, steps) or value.ndim != 3:
+                raise ValueError(f"{key} must be (batch, n_obs_steps={self.n_obs_steps}, length), got "
+                                 f"{tuple(value.shape)}")
+            features.append(encoder(value.flatten(0, 1)))
+        return torch.cat(features, dim=-1).reshape(batch, steps * self.step_dim)

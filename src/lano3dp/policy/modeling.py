@@ -11,7 +11,6 @@ normalizer.json (the same statistics, human-readable); loading never unpickles.
 from __future__ import annotations
 
 import json
-import os
 from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -23,9 +22,11 @@ import torch.nn.functional as F
 from torch import nn
 
 from lano3dp.errors import CorruptFileError, IncompatibleFormatError
+from lano3dp.guidance.schedulers import SCHEDULERS, DiffusionScheduler, SchedulerConfig
 from lano3dp.jsonio import write_text_atomic
 from lano3dp.policy.config import PolicyConfig
 from lano3dp.policy.encoders import ObservationEncoder
+from lano3dp.policy.integrity import reseal_after_writing, verify_checkpoint, write_safetensors
 from lano3dp.policy.normalizer import LinearNormalizer
 from lano3dp.policy.unet import ConditionalUnet1D
 
@@ -37,12 +38,15 @@ NORMALIZER_NAME = "normalizer.json"
 # version 2 adds relative action positions (config.action_frame), so only such checkpoints are written as 2
 # and a release that predates them refuses them rather than reading offsets as world positions; version 3
 # adds the object pose features (config.object_pose_features), whose UNet input is wider; version 4 widens it
-# again by their third moments (config.object_pose_skew).
-CHECKPOINT_FORMAT_VERSION = 4
+# again by their third moments (config.object_pose_skew); version 5 adds task inputs (config.task_inputs, e.g. a
+# goal the env hands over as obs["goal"]), which a release without them would not feed.
+CHECKPOINT_FORMAT_VERSION = 5
 
 
 def format_version_for(config: PolicyConfig) -> int:
     """The oldest checkpoint format that can hold a policy of this config."""
+    if config.task_inputs:
+        return 5
     if config.object_pose_skew:
         return 4
     if config.object_pose_features:
@@ -66,17 +70,13 @@ class ActionChunk(NamedTuple):
         return ActionChunk(self.actions.detach().cpu().numpy(), self.trajectory.detach().cpu().numpy())
 
 
-def make_scheduler(config: PolicyConfig, kind: str):
-    """A diffusers DDPM or DDIM scheduler with the policy's diffusion process (epsilon, clip_sample)."""
-    from diffusers import DDIMScheduler, DDPMScheduler
-
-    common = dict(num_train_timesteps=config.num_train_timesteps, beta_schedule=config.beta_schedule,
-                  clip_sample=config.clip_sample, prediction_type=config.prediction_type)
-    if kind == "ddpm":
-        return DDPMScheduler(variance_type="fixed_small", **common)
-    if kind == "ddim":
-        return DDIMScheduler(set_alpha_to_one=True, steps_offset=0, **common)
-    raise ValueError(f"unknown scheduler {kind!r}; use 'ddpm' or 'ddim'")
+def make_scheduler(config: PolicyConfig, kind: str) -> DiffusionScheduler:
+    """A DDPM or DDIM scheduler (`guidance.schedulers`) with the policy's diffusion process (epsilon, clip_sample)."""
+    if kind not in SCHEDULERS:
+        raise ValueError(f"unknown scheduler {kind!r}; use one of {sorted(SCHEDULERS)}")
+    process = SchedulerConfig(num_train_timesteps=config.num_train_timesteps, beta_schedule=config.beta_schedule,
+                              prediction_type=config.prediction_type, clip_sample=config.clip_sample)
+    return SCHEDULERS[kind](process)
 
 
 SampleFn = Callable[[dict[str, torch.Tensor]], ActionChunk]
@@ -132,7 +132,7 @@ class ChunkedControl:
 
         Args:
             obs: one step, numpy or torch, raw units: {visual key: (B, ...) e.g. object_clouds (B, K, N, 3)
-                metres, "state": (B, 11)}; other keys are ignored.
+                metres, "state": (B, 11), each task input (B, D) e.g. "goal"}; other keys are ignored.
             sample: window {key: (B, To, ...) tensors} -> ActionChunk, called instead of predict_action_chunk
                 when a chunk is due; its `actions` are the ones queued, so it also decides how many run before
                 the next chunk (a control loop that guides, checks or records its chunks passes it).
@@ -190,17 +190,23 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
         visual_dim = config.observation.normalizer_dim(config)  # None: e.g. images, scaled by their encoder
         if visual_dim is not None:
             stats_dims[config.visual_key] = visual_dim
+        stats_dims |= config.task_inputs  # each task input (obs["goal"], ...) gets a min-max range per component
         self.normalizer = LinearNormalizer(stats_dims)
         self.obs_encoder = ObservationEncoder(config)
         self.unet = ConditionalUnet1D(config.action_dim, self.obs_encoder.out_dim, config.diffusion_step_embed_dim,
                                       config.down_dims, config.kernel_size, config.n_groups)
         self.noise_scheduler = make_scheduler(config, "ddpm")
-        self._schedulers: dict[str, object] = {}
+        self._schedulers: dict[str, DiffusionScheduler] = {}
         self.reset()
 
     @property
     def device(self) -> torch.device:
         return next(self.parameters()).device
+
+    @property
+    def dtype(self) -> torch.dtype:
+        """The weights' floating-point type: what observations, noise and actions are computed in."""
+        return next(self.parameters()).dtype
 
     # ---- normaliser --------------------------------------------------------------------
     def set_normalizer(self, stats: Mapping[str, Mapping[str, np.ndarray]]) -> None:
@@ -228,8 +234,8 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
         last observed step (state (B, To, state_dim), raw) in the position columns, or 0 for absolute actions."""
         if self.config.action_frame == "absolute":
             return 0.0
-        state = torch.as_tensor(state, device=self.device).float()
-        anchor = torch.zeros(state.shape[0], 1, self.config.action_dim, device=self.device)
+        state = torch.as_tensor(state, device=self.device).to(self.dtype)
+        anchor = torch.zeros(state.shape[0], 1, self.config.action_dim, device=self.device, dtype=self.dtype)
         anchor[:, 0, :3] = state[:, -1, :3]
         return anchor
 
@@ -251,7 +257,7 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
                 raise KeyError(f"observation is missing {key!r}; a {config.obs_type!r} policy needs {config.obs_keys}")
             value = torch.as_tensor(obs[key], device=self.device)
             if key in self.normalizer.keys:  # an unnormalised input (uint8 images) goes to its encoder as it is
-                value = value.float()
+                value = value.to(self.dtype)
             if value.ndim < 3 or value.shape[1] < config.n_obs_steps:
                 raise ValueError(f"{key} must be (batch, steps >= n_obs_steps={config.n_obs_steps}, ...), "
                                  f"got {tuple(value.shape)}")
@@ -271,13 +277,13 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
 
         `generator` draws the diffusion noise and timesteps (None: torch's global RNG).
         """
-        actions = torch.as_tensor(batch["action"], device=self.device).float()
+        actions = torch.as_tensor(batch["action"], device=self.device).to(self.dtype)
         if actions.shape[1:] != (self.config.horizon, self.config.action_dim):
             raise ValueError(f"action batch must be (B, {self.config.horizon}, {self.config.action_dim}), "
                              f"got {tuple(actions.shape)}")
         cond = self.encode_obs(batch["obs"])
         trajectory = self.normalize_actions(actions, batch["obs"]["state"])
-        noise = torch.randn(trajectory.shape, generator=generator, device=self.device)
+        noise = torch.randn(trajectory.shape, generator=generator, device=self.device, dtype=trajectory.dtype)
         timesteps = torch.randint(0, self.config.num_train_timesteps, (trajectory.shape[0],), generator=generator,
                                   device=self.device)
         noisy = self.noise_scheduler.add_noise(trajectory, noise, timesteps)
@@ -288,7 +294,7 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
         return self.compute_loss(batch, generator)
 
     # ---- inference ---------------------------------------------------------------------
-    def get_scheduler(self, kind: str | None = None):
+    def get_scheduler(self, kind: str | None = None) -> DiffusionScheduler:
         """The cached inference scheduler ("ddpm" or "ddim"; default config.inference_scheduler)."""
         kind = kind or self.config.inference_scheduler
         if kind not in self._schedulers:
@@ -307,14 +313,18 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
             guidance: lano3dp.guidance.GuidanceConfig, or None for plain sampling.
             position_cost: metric EE positions (B, H, 3) -> cost (B,); required when guidance is enabled.
                 It sees the un-normalised A_0|k (or A_k), through a differentiable un-normalisation.
-            scheduler: "ddpm", "ddim", a diffusers scheduler instance, or None (config.inference_scheduler).
+            scheduler: "ddpm", "ddim", a scheduler instance (`guidance.schedulers`, or a diffusers one of the same
+                process), or None (config.inference_scheduler).
             num_inference_steps: default config.num_inference_steps (DDPM: every training step).
-            generator: seeds the initial noise and DDPM's per-step noise.
+            generator: seeds the initial noise and DDPM's per-step noise; or one generator per observation (B),
+                so each sample is what it would be alone. A CPU generator gives the same noise on any device
+                (drawn on the CPU, then moved).
             initial_noise: (B, H, action_dim) A_T, to reproduce a sample exactly.
             on_step: callback after every denoising step (lano3dp.guidance.sampler.DenoiseStep).
 
         Returns:
-            ActionChunk(actions (B, Ta, D), trajectory (B, H, D)), un-normalised, on the policy's device.
+            ActionChunk(actions (B, Ta, D), trajectory (B, H, D)), un-normalised, on the policy's device and in
+            its dtype.
         """
         from lano3dp.guidance.sampler import GuidanceMode, denoise
 
@@ -328,7 +338,8 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
         if guided and position_cost is None:
             raise ValueError("guidance was requested but no position_cost was given (build one from the obstacles)")
         was_training = self.training
-        self.eval()
+        if was_training:  # eval() walks every module: a few ms a chunk, for a flag already off outside training
+            self.eval()
         try:
             with torch.no_grad():
                 cond = self.encode_obs(obs)
@@ -336,29 +347,32 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
             state = obs["state"]
 
             def noise_fn(sample: torch.Tensor, timesteps: torch.Tensor) -> torch.Tensor:
-                return self.unet(sample, timesteps.to(sample.device), cond)
+                return self.unet(sample, timesteps, cond)
 
             def cost_fn(trajectory: torch.Tensor) -> torch.Tensor:
                 return position_cost(self.unnormalize_actions(trajectory, state)[..., :3])
 
             if initial_noise is not None:
-                initial_noise = torch.as_tensor(initial_noise, device=self.device).float()
+                initial_noise = torch.as_tensor(initial_noise, device=self.device).to(self.dtype)
                 expected = (batch, config.horizon, config.action_dim)
                 if tuple(initial_noise.shape) != expected:
                     raise ValueError(f"initial_noise must be {expected}, got {tuple(initial_noise.shape)}")
             normalised = denoise(noise_fn, scheduler, (batch, config.horizon, config.action_dim),
                                  num_inference_steps=num_inference_steps, generator=generator, guidance=guidance,
-                                 cost_fn=cost_fn if guided else None, initial_noise=initial_noise, on_step=on_step)
+                                 cost_fn=cost_fn if guided else None, initial_noise=initial_noise, on_step=on_step,
+                                 device=self.device, dtype=self.dtype)
             with torch.no_grad():
                 trajectory = self.unnormalize_actions(normalised.detach(), state)
         finally:
-            self.train(was_training)
+            if was_training:
+                self.train()
         start = config.n_obs_steps - 1
         return ActionChunk(trajectory[:, start:start + config.n_action_steps], trajectory)
 
     # ---- persistence -------------------------------------------------------------------
     def save_pretrained(self, directory: str | Path) -> Path:
-        """Write config.json, model.safetensors and normalizer.json into `directory` (created if needed)."""
+        """Write config.json, model.safetensors and normalizer.json into `directory` (created if needed), sealed by
+        its manifest.json (`lano3dp.policy.integrity`)."""
         directory = Path(directory)
         directory.mkdir(parents=True, exist_ok=True)
         state = {key: value.detach().cpu().contiguous() for key, value in self.state_dict().items()}
@@ -368,6 +382,7 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
                  for key, item in self.normalizer_stats().items()}
         write_text_atomic(directory / NORMALIZER_NAME, json.dumps(stats, indent=2))
         write_text_atomic(directory / CONFIG_NAME, self.config.to_json() + "\n")
+        reseal_after_writing(directory, (WEIGHTS_NAME, NORMALIZER_NAME, CONFIG_NAME))
         return directory
 
     @classmethod
@@ -377,6 +392,7 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
         Raises:
             FileNotFoundError: no checkpoint there.
             CorruptFileError: config.json or model.safetensors is truncated, unparsable or inconsistent.
+            CheckpointSealError: a file changed since the checkpoint was saved (`lano3dp.policy.integrity`).
         """
         directory = resolve_checkpoint(directory)
         check_format_version(directory / WEIGHTS_NAME)
@@ -389,6 +405,7 @@ class DiffusionPolicy(ChunkedControl, nn.Module):
             raise CorruptFileError(directory / WEIGHTS_NAME, f"weights do not match config.json: {error}") from error
         if not bool(policy.normalizer.fitted):
             raise CorruptFileError(directory / WEIGHTS_NAME, "holds no normaliser statistics")
+        verify_checkpoint(directory)  # last: a file that is damaged as well as edited gets its own message first
         return policy.to(device).eval()
 
 
@@ -464,14 +481,8 @@ def tensors_checksum(tensors: Mapping[str, torch.Tensor]) -> str:
 
 
 def save_safetensors(tensors: Mapping[str, torch.Tensor], path: Path, metadata: Mapping[str, str]) -> Path:
-    """Write tensors with their checksum in the metadata, atomically (temporary file + rename)."""
-    from safetensors.torch import save_file
-
-    path = Path(path)
-    temporary = path.with_name(path.name + ".tmp")
-    save_file(dict(tensors), str(temporary), metadata={**metadata, CHECKSUM_KEY: tensors_checksum(tensors)})
-    os.replace(temporary, path)
-    return path
+    """Write tensors with their checksum in the metadata, atomically (temporary file + rename), checked whole."""
+    return write_safetensors(tensors, path, metadata={**metadata, CHECKSUM_KEY: tensors_checksum(tensors)})
 
 
 def load_safetensors(path: Path) -> dict[str, torch.Tensor]:

@@ -16,6 +16,8 @@ from typing import Any
 import torch
 
 from lano3dp.errors import Lano3dpError
+from lano3dp.jsonio import write_json
+from lano3dp.policy.integrity import seal
 from lano3dp.policy.modeling import (
     CONFIG_NAME,
     NORMALIZER_NAME,
@@ -86,6 +88,7 @@ def export_fp16(checkpoint: str | Path, out: str | Path, record: dict[str, Any] 
                                                           "weights_dtype": "float16"})
     for name in (CONFIG_NAME, NORMALIZER_NAME):
         shutil.copy2(source / name, out / name)
+    seal(out)  # what was just written from a verified source (the source's guidance tuning is not carried)
     if record is not None:
-        (out / RECORD_NAME).write_text(json.dumps(record, indent=2) + "\n")
+        write_json(out / RECORD_NAME, record)  # verified, like every file of the checkpoint
     return out

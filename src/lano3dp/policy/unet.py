@@ -24,8 +24,10 @@ class SinusoidalPosEmb(nn.Module):
 
     def forward(self, timesteps: torch.Tensor) -> torch.Tensor:
         half = self.dim // 2
-        frequencies = torch.exp(-math.log(10000) / max(half - 1, 1) * torch.arange(half, device=timesteps.device))
-        angles = timesteps.float()[:, None] * frequencies[None, :]
+        steps = timesteps if timesteps.is_floating_point() else timesteps.float()
+        frequencies = torch.exp(-math.log(10000) / max(half - 1, 1) * torch.arange(half, device=steps.device,
+                                                                                   dtype=steps.dtype))
+        angles = steps[:, None] * frequencies[None, :]
         return torch.cat([angles.sin(), angles.cos()], dim=-1)
 
 
@@ -105,7 +107,7 @@ class ConditionalUnet1D(nn.Module):
                              f"for a UNet with {self.levels} levels")
         if not torch.is_tensor(timestep):
             timestep = torch.tensor([timestep], device=sample.device)
-        timestep = timestep.reshape(-1).expand(sample.shape[0])
+        timestep = timestep.reshape(-1).expand(sample.shape[0]).to(sample.dtype)  # the embedding in the sample's dtype
         cond = torch.cat([self.diffusion_step_encoder(timestep), global_cond], dim=-1)
         x = sample.transpose(1, 2)
         skips = []

@@ -11,6 +11,18 @@ plugs in by implementing it (structural typing: no inheritance needed).
 Real robots without ground-truth segmentation leave `frame.segmentation` None and use an
 open-vocabulary segmenter; `info` should carry "success" when the robot can tell (else False).
 
+The grasp flag, state[10]: 1.0 while the gripper holds an object, else 0.0 (the built-in simulator: an object
+touched by both finger pads while the gripper is commanded closed). It is used twice: the policy sees it as part
+of the state (the paper's gripper feedback: it tells a grasp that held from one that slipped), and guided runs
+add the held object (the runner's `held_object`) to the body kept clear of obstacles while it is set (>= 0.5).
+An env that cannot tell gives 0.0 at every step, in its demonstrations and at evaluation alike: the policy then
+learns nothing from it (a constant input), and guidance keeps the hand clear but not a carried object. Where the
+env can tell (finger contacts, a gripper's object-detection bit, the task's own "grasped" check), give that: it
+must mean the same in the demonstrations and in evaluation.
+
+Optional: obs["goal"] (D,) or another registered task input (`lano3dp.policy.observations.vector`): a goal the
+episode draws that no camera shows; `collect` records it and a policy trained on it receives it every step.
+
 Optional: `max_ee_step`, the metres the end effector moves at most in one step. Guided runs then predict the
 path the arm really takes through a chunk (it chases each waypoint at that pace) when they check and repair
 the chunk; without it every waypoint is assumed reached.
@@ -37,7 +49,7 @@ class SimulatorProtocol(Protocol):
     max_steps: int
 
     def reset(self, *, seed: int | None = None, options: dict | None = None) -> tuple[dict[str, Any], dict]:
-        """Start an episode; obs holds at least "state" (11,) float32."""
+        """Start an episode; obs holds at least "state" (11,) float32 (and "goal" (D,) in a goal-conditioned task)."""
         ...
 
     def step(self, action: np.ndarray) -> tuple[dict[str, Any], float, bool, bool, dict]:

@@ -8,16 +8,23 @@ the cost of the usual two passes. The depth conversion below follows
 
 One GL context lives as long as the renderer; a new model (one per episode) only needs a
 new `MjrContext`, which is cheap for the primitive-only scene.
+
+Renderers of several threads (batched evaluation: one env per thread) take turns: MuJoCo releases the GIL while
+it draws, and Mesa's software rasteriser crashed (a segfault in swrast_dri.so) when two threads drew into their
+own contexts at once. Taking turns costs no CPU time; the threads' other work still interleaves.
 """
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 
 from lano3dp.geometry import PinholeCamera
+
+_GL_TURN = threading.RLock()  # one thread's GL work at a time, process-wide (see the module's docstring)
 
 
 @dataclass
@@ -35,11 +42,12 @@ class FusedRenderer:
     """Renders cameras of the current model. Call `set_model` after each (re)build; `close` at the end."""
 
     def __init__(self, width: int = 128, height: int = 128):
-        from mujoco.rendering.classic.gl_context import GLContext
+        from mujoco.gl_context import GLContext  # MuJoCo 4.x also has it under mujoco.rendering.classic
 
         self.width, self.height = int(width), int(height)
-        self._gl = GLContext(self.width, self.height)
-        self._gl.make_current()
+        with _GL_TURN:
+            self._gl = GLContext(self.width, self.height)
+            self._gl.make_current()
         self._model: mujoco.MjModel | None = None
         self._context: mujoco.MjrContext | None = None
         self._scene: mujoco.MjvScene | None = None
@@ -50,6 +58,10 @@ class FusedRenderer:
         self._camera.type = mujoco.mjtCamera.mjCAMERA_FIXED
 
     def set_model(self, model: mujoco.MjModel) -> None:
+        with _GL_TURN:
+            self._set_model(model)
+
+    def _set_model(self, model: mujoco.MjModel) -> None:
         if model.vis.global_.offwidth < self.width or model.vis.global_.offheight < self.height:
             raise ValueError(
                 f"image {self.width}x{self.height} exceeds the model's offscreen buffer "
@@ -78,6 +90,10 @@ class FusedRenderer:
 
     def render(self, data: mujoco.MjData, camera_name: str, rgb: bool = True) -> CameraImages:
         """Render one camera: an optional RGB pass, then the fused depth + segmentation pass."""
+        with _GL_TURN:
+            return self._render(data, camera_name, rgb)
+
+    def _render(self, data: mujoco.MjData, camera_name: str, rgb: bool) -> CameraImages:
         model = self._require_model()
         self._gl.make_current()
         self._camera.fixedcamid = model.camera(camera_name).id
@@ -129,6 +145,10 @@ class FusedRenderer:
         return self._model
 
     def close(self) -> None:
+        with _GL_TURN:
+            self._close()
+
+    def _close(self) -> None:
         if self._gl is None:
             return
         self._gl.make_current()

@@ -96,13 +96,18 @@ def add_gripper(builder: SceneBuilder, gripper: GripperSpec) -> ObjectInfo:
         finger.add_geom(name=f"gripper/{side}_pad", type=mujoco.mjtGeom.mjGEOM_BOX, size=[fx, fy, fz],
                         rgba=dark, mass=gripper.finger_mass, friction=list(gripper.finger_friction),
                         condim=6, solref=[0.01, 1.0])
-    spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1="gripper/left", name2="gripper/right",
-                      data=[0, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0])
-    spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1="gripper_target", name2="gripper",
-                      objtype=mujoco.mjtObj.mjOBJ_BODY, solref=[0.01, 1.0],
-                      data=[0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1, 0])
+    coupling = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1="gripper/left", name2="gripper/right")
+    _set_equality_data(coupling, [0, 1])  # polynomial coefficients: right = 0 + 1 * left
+    weld = spec.add_equality(type=mujoco.mjtEq.mjEQ_WELD, name1="gripper_target", name2="gripper",
+                             objtype=mujoco.mjtObj.mjOBJ_BODY, solref=[0.01, 1.0])
+    _set_equality_data(weld, [0, 0, 0, 0, 0, 0, 1, 0, 0, 0, 1])  # anchor, relative pose (pos, quat), torque scale
     actuator = spec.add_actuator(name="fingers", target="gripper/left", trntype=mujoco.mjtTrn.mjTRN_JOINT)
-    actuator.set_to_position(kp=gripper.kp)
+    if hasattr(actuator, "set_to_position"):
+        actuator.set_to_position(kp=gripper.kp)
+    else:  # MuJoCo 3.3.0: the same position servo by its gains, force = kp * (ctrl - q)
+        actuator.gaintype, actuator.biastype = mujoco.mjtGain.mjGAIN_FIXED, mujoco.mjtBias.mjBIAS_AFFINE
+        actuator.gainprm[:3] = [gripper.kp, 0, 0]
+        actuator.biasprm[:3] = [0, -gripper.kp, 0]
     actuator.ctrlrange = [0.0, gripper.half_gap + 0.001]
     actuator.forcerange = [-gripper.max_force, gripper.max_force]
     actuator.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
@@ -110,6 +115,13 @@ def add_gripper(builder: SceneBuilder, gripper: GripperSpec) -> ObjectInfo:
                       footprint_radius=GRIPPER_FOOTPRINT_RADIUS, position=np.asarray(gripper.home), role="robot",
                       extents=np.array([0.02, gripper.half_gap + 0.02, 0.12]))
     return builder.register(info)
+
+
+def _set_equality_data(equality, values) -> None:
+    """The first values of an equality's data, the rest zero: MuJoCo 3.x holds 11 numbers there, 4.x 12."""
+    data = np.zeros(len(equality.data))
+    data[:len(values)] = values
+    equality.data = data
 
 
 class GripperHandle:

@@ -111,6 +111,10 @@ class SceneBuilder:
         option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
         option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
         option.impratio = 10.0
+        # MuJoCo 4 makes several contacts between flat convex surfaces by default (a cube on the bowl's base);
+        # before it, one contact let the pourable cubes sink through the 8 mm base: switch it on there too
+        if hasattr(mujoco.mjtEnableBit, "mjENBL_MULTICCD"):
+            option.enableflags |= mujoco.mjtEnableBit.mjENBL_MULTICCD
         visual = self.spec.visual
         # Fast offscreen rendering on llvmpipe: shadow maps and multisampling cost 10-80x.
         visual.quality.shadowsize = 0
@@ -156,12 +160,11 @@ class SceneBuilder:
         floor.add_geom(name="floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[3.0, 3.0, 0.05],
                        rgba=list(style.floor_rgba), contype=0, conaffinity=0)
         d = style.light_diffuse
-        self.world.add_light(name="top", pos=[0.45, 0.0, 2.0], dir=[0, 0, -1], castshadow=False,
-                             diffuse=[d, d, d], specular=[0.1, 0.1, 0.1],
-                             type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
-        self.world.add_light(name="front", pos=[1.5, 0.0, 1.2], dir=[-0.7, 0, -0.6], castshadow=False,
-                             diffuse=[0.3, 0.3, 0.3], specular=[0, 0, 0],
-                             type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL)
+        for light in (self.world.add_light(name="top", pos=[0.45, 0.0, 2.0], dir=[0, 0, -1], castshadow=False,
+                                           diffuse=[d, d, d], specular=[0.1, 0.1, 0.1]),
+                      self.world.add_light(name="front", pos=[1.5, 0.0, 1.2], dir=[-0.7, 0, -0.6],
+                                           castshadow=False, diffuse=[0.3, 0.3, 0.3], specular=[0, 0, 0])):
+            _make_directional(light)
 
     # ---- objects and cameras -----------------------------------------------------------
     def register(self, info: ObjectInfo) -> ObjectInfo:
@@ -184,3 +187,12 @@ class SceneBuilder:
             return self.spec.compile()
         except ValueError as error:
             raise SceneError(f"the scene does not compile: {error}") from error
+
+
+def _make_directional(light) -> None:
+    """A directional light in every MuJoCo the package supports: a light type from 3.3.1 on (mjtLightType), the
+    `directional` flag before."""
+    if hasattr(mujoco, "mjtLightType"):
+        light.type = mujoco.mjtLightType.mjLIGHT_DIRECTIONAL
+    else:
+        light.directional = True

@@ -12,8 +12,14 @@
     needs_rgb                     the env must render colour for it
     validate(config)              raise ValueError for settings the type cannot use
 
-Built in: "objects" (Lan-o3dp), "scene" (DP3) and "image" (Diffusion Policy), one module each. A new type is one
-subclass and one call, from any module imported before a policy of it is built or loaded:
+Built in: "objects" (Lan-o3dp), "scene" (DP3) and "image" (Diffusion Policy), one module each, the visual input a
+policy's `obs_type` names. Beside it a policy may take task inputs (`PolicyConfig.task_inputs`): low-dimensional
+vectors the env hands over itself as obs[key], such as a goal that changes every episode and renders nothing. Their
+types have `source = "obs"` (`vector.VectorObservation`; "goal" is built in, key "goal"): `collect` records
+obs[key] whenever the env's observation holds it, training reads the vector's length off the dataset, the policy
+normalises and encodes it like the state, and evaluation passes obs[key] every step (`task_inputs_of`).
+
+A new type is one subclass and one call, from any module imported before a policy of it is built or loaded:
 
     class Tops(ObservationType):
         key = "object_tops"
@@ -30,7 +36,7 @@ collecting the data it trains on.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -83,6 +89,7 @@ class ObservationType:
     key: str = ""
     object_slots: bool = False
     needs_rgb: bool = False
+    source: str = "frame"  # "frame": made from the camera frame; "obs": the env's observation holds it as obs[key]
 
     def encoder(self, config: PolicyConfig) -> nn.Module:
         """The module mapping one normalised step (M, ...) to (M, out_dim) features; it sets `out_dim`.
@@ -124,6 +131,9 @@ class ObservationType:
 def _check_key(name: str, observation_type) -> None:
     if not isinstance(getattr(observation_type, "key", None), str) or not observation_type.key:
         raise TypeError(f"observation type {name!r} needs a key (its dataset and observation key)")
+    if getattr(observation_type, "source", "frame") == "obs" and observation_type.key != name:
+        raise TypeError(f"a task input (source 'obs') is registered under its key: register "
+                        f"{observation_type.key!r}, not {name!r}")
 
 
 _REGISTRY: Registry[ObservationType] = Registry(
@@ -170,6 +180,36 @@ def recorders(context: RecordContext) -> dict[str, Recorder]:
     return found
 
 
+def task_input_types() -> dict[str, ObservationType]:
+    """{name: type} of every registered type the env hands over as obs[key] (source "obs"), in registry order."""
+    return {name: _REGISTRY.get(name) for name in _REGISTRY.names() if _REGISTRY.get(name).source == "obs"}
+
+
+def task_inputs_of(obs: Mapping[str, Any], names: Sequence[str] | None = None) -> dict[str, np.ndarray]:
+    """{key: (D,) float32} of the task inputs an observation holds: those of `names` (each required, KeyError naming
+    the missing key), or, with None, of every registered task-input type whose key `obs` has (what `collect`
+    records)."""
+    import numpy as np
+
+    types = task_input_types()
+    if names is None:
+        chosen = [t for t in types.values() if isinstance(obs, Mapping) and t.key in obs]
+    else:
+        chosen = [get_observation_type(name) for name in names]
+    found = {}
+    for observation_type in chosen:
+        if not isinstance(obs, Mapping) or observation_type.key not in obs:
+            held = ", ".join(sorted(map(str, obs))) if isinstance(obs, Mapping) else type(obs).__name__
+            raise KeyError(f"the policy takes obs[{observation_type.key!r}] (a task input) but the env's observation "
+                           f"has no {observation_type.key!r} (it holds {held})")
+        value = np.asarray(obs[observation_type.key], dtype=np.float32).reshape(-1)
+        if value.size == 0 or not np.all(np.isfinite(value)):
+            raise ValueError(f"obs[{observation_type.key!r}] must be a non-empty finite vector, got "
+                             f"{np.asarray(obs[observation_type.key]).tolist()}")
+        found[observation_type.key] = value
+    return found
+
+
 def held_frames(recorders: Mapping[str, Recorder]) -> int:
     """Frames the recorders held from an earlier frame (the store's `held_clouds`)."""
     return sum(int(getattr(recorder, "held", 0)) for recorder in recorders.values())
@@ -179,9 +219,10 @@ def _register_builtins() -> tuple[str, ...]:
     from lano3dp.policy.observations.image import ImageObservation
     from lano3dp.policy.observations.objects import ObjectCloudsObservation
     from lano3dp.policy.observations.scene import SceneCloudObservation
+    from lano3dp.policy.observations.vector import VectorObservation
 
     for name, observation_type in (("objects", ObjectCloudsObservation()), ("scene", SceneCloudObservation()),
-                                   ("image", ImageObservation())):
+                                   ("image", ImageObservation()), ("goal", VectorObservation("goal"))):
         register_observation_type(name, observation_type)
     return _REGISTRY.mark_builtin()
 
@@ -191,5 +232,5 @@ BUILTIN_OBSERVATION_TYPES = _register_builtins()
 __all__ = [
     "BUILTIN_OBSERVATION_TYPES", "ObservationType", "RecordContext", "UnknownObservationTypeError",
     "UnrecordableEpisode", "get_observation_type", "held_frames", "observation_type_names", "recorders",
-    "register_observation_type", "unregister_observation_type",
+    "register_observation_type", "task_input_types", "task_inputs_of", "unregister_observation_type",
 ]

@@ -198,6 +198,10 @@ class Task(ABC):
     synonyms: ClassVar[Mapping[str, tuple[str, ...]]] = {}
     carried: ClassVar[str | None] = None
     accepts_any: ClassVar[tuple[str, ...]] = ()
+    # The oldest MuJoCo (major, minor) whose contacts the task's expert was shown to succeed under; on an older one
+    # `TabletopEnv` warns (docs/simulator-versions.md). Every MuJoCo the package supports, by default.
+    reliable_from_mujoco: ClassVar[tuple[int, int]] = (3, 3)
+    simulator_note: ClassVar[str] = ""  # what goes wrong on an older MuJoCo
 
     @classmethod
     def skill_spec(cls) -> SkillSpec:

@@ -1,0 +1,380 @@
+"""The safety invariant: every object an instruction names is acted on or avoided, whatever the parse says.
+
+`object_mentions` finds the noun phrases of an instruction that name a physical thing, in any role (the object
+to carry, a landmark "next to the mug", a warning "the vase is fragile", a list "X, Y and Z are in the way",
+the object of a negated verb), with its own word lists and without the parser's reading of roles, so a parser
+mistake cannot also hide the mistake. `enforce_mentions` then checks a plan from any source (the rules or an
+LLM): a mention that is neither a target nor an obstacle becomes an obstacle, with a warning that says so,
+unless the instruction explicitly permits contact with it ("you may touch the mug", "don't worry about the
+mug", "ignore the mug"); an obstacle with permitted contact is dropped, with a warning.
+
+What is a mention:
+- any registry or scene object word, or a noun of `vocabulary.OBJECT_NOUNS`, with or without a determiner
+  (but not used as a verb: "water the plant", "dock the phone");
+- the head of a noun phrase after a determiner ("the stapler", "a zorb"), with its compound ("coffee mug",
+  "water bottle", "tin can");
+- not: support surfaces the robot works on (table, counter), parts of an object (lid, handle, door), contents
+  and liquids (water, the bowl's contents), places (side, corner, way), the robot and the user, vague heads
+  (thing, anything), and the contents after "a bottle of wine".
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+from lano3dp.language.plan import MAX_NAME_CHARS, ObjectRef, TaskPlan
+from lano3dp.language.registry import SkillSpec
+from lano3dp.vocabulary import COLOURS, OBJECT_NOUNS, SIZE_WORDS, canonical_attribute, singular
+
+_DETERMINERS = frozenset(
+    """the a an this that these those my your our their his her its some any another both either each every
+    all two three four five several few many""".split()
+)
+_POSITIONS = frozenset(
+    """top upper bottom lower left leftmost right rightmost front back rear nearest closest farthest furthest
+    centre center middle first second third last other""".split()
+)
+_MODIFIERS = COLOURS | SIZE_WORDS.keys() | _POSITIONS
+# Nothing to act on or avoid: surfaces under everything, parts of objects, contents, places, people, vagueness.
+_NOT_OBJECTS = frozenset(
+    """table counter countertop worktop floor surface desk workspace shelf lid handle door knob cap cork rim edge
+    spout neck stem side corner top bottom front back inside outside middle centre center left right area spot
+    place way path route direction time water liquid soup drink contents content stuff dirt dust crumb crumbs mess
+    debris trash rubbish one ones thing things something anything everything nothing robot gripper arm hand
+    yourself you me it them bit while moment second minute job task obstacle? way""".split()
+) - {"obstacle?"}
+# Words that end a noun phrase.
+_BOUNDARY = frozenset(
+    """in into on onto over under from to with without of at by near next beside behind inside out up down off
+    away back for using toward towards across through around while and or but then so that which who please
+    again too there here it them is are be was were can could would will should if when before after until as
+    not don't dont do does very now just also still nearby close somewhere between against past beyond below
+    above beneath underneath along than like i you we they he she me us sits sit stands stand lies lie rests
+    looks look seems seem appears has have had holds contains 's must might may""".split()
+)
+# Object words that are also verbs or function words: without a determiner they are not read as objects.
+_AMBIGUOUS_BARE = frozenset(
+    """watch case matches base dock brush plant tape drill nail screw bolt mill board frame picture block tube fan
+    can tin key mouse remote screen bell paper cloth mirror comb plug wire cable cord box pen tray glass glasses
+    water charger station cradle item object toy pot bottle cup lamp brick marker ball flower""".split()
+)
+_COMPOUND_STOPS = frozenset("looks seems appears contains holds has have had".split())
+# Phrases that permit contact with what follows them, up to the end of the clause.
+_PERMISSIONS: tuple[tuple[str, ...], ...] = (
+    ("may", "touch"), ("can", "touch"), ("may", "bump"), ("can", "bump"), ("may", "push"), ("can", "push"),
+    ("may", "move"), ("can", "move"), ("ok", "to"), ("okay", "to"), ("fine", "to"), ("alright", "to"),
+    ("free", "to"), ("don't", "worry", "about"), ("dont", "worry", "about"), ("do", "not", "worry", "about"),
+    ("no", "need", "to", "avoid"), ("ignore",), ("doesn't", "matter"), ("does", "not", "matter"),
+    ("allowed", "to", "touch"), ("contact", "with"),
+)  # fmt: skip
+# Said after an object, permitting contact with it ("the mug can be moved", "the mug may be touched").
+_PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
+    ("can", "be", "touched"), ("can", "be", "moved"), ("can", "be", "pushed"), ("may", "be", "touched"),
+    ("may", "be", "moved"), ("may", "be", "pushed"), ("doesn't", "matter"), ("does", "not", "matter"),
+    ("is", "fine"), ("is", "ok"), ("is", "okay"), ("is", "alright"), ("is", "allowed"), ("are", "fine"),
+    ("is", "no", "problem"), ("'s", "fine"), ("'s", "ok"), ("'s", "okay"),
+)  # fmt: skip
+_CLAUSE_END = frozenset(". ; : ! ? , but and then while".split())
+_CLAUSE_START = frozenset(", ; . : ! ? and then please also now just to you i kindly first next".split())
+_COMPOUND_MODIFIERS = frozenset("water wine coffee tea glass".split())  # "water bottle", "coffee mug"
+_DETACHABLE = frozenset("lid cap cork cover case stopper".split())
+_CONTAINERS_OF = frozenset(
+    "bottle glass cup mug jar can bowl box bag bucket jug pitcher carafe flask pot pan tin".split()
+)
+
+
+@dataclass(frozen=True)
+class Mention:
+    """An object named in an instruction.
+
+    Attributes:
+        name: the noun, with its compound ("coffee mug"), singular.
+        color / size / position: attribute words said in front of it, canonical.
+        index: token index of its head.
+        permitted: the instruction explicitly permits contact with it.
+    """
+
+    name: str
+    color: str | None = None
+    size: str | None = None
+    position: str | None = None
+    index: int = 0
+    permitted: bool = False
+
+    @property
+    def head(self) -> str:
+        return self.name.split()[-1]
+
+    def ref(self) -> ObjectRef:
+        return ObjectRef(name=self.name, color=self.color, size=self.size, position=self.position)
+
+    @property
+    def phrase(self) -> str:
+        return self.ref().phrase
+
+
+@functools.lru_cache(maxsize=64)
+def _object_words(extra: tuple[str, ...]) -> dict[str, list[tuple[str, ...]]]:
+    """Known object words (tuples of tokens) by their first token, longest first: a lookup per token, not a
+    scan of every word (a 1,000-character instruction is read in milliseconds)."""
+    words = {tuple(w.split()) for w in OBJECT_NOUNS} | {tuple(w.split()) for w in extra if w}
+    index: dict[str, list[tuple[str, ...]]] = {}
+    for entry in sorted(words, key=lambda w: -len(w)):
+        index.setdefault(entry[0], []).append(entry)
+    return index
+
+
+def _known_at(words: Sequence[str], i: int, known: dict[str, list[tuple[str, ...]]]) -> int:
+    """Length of the longest known object word starting at words[i] (its last word may be plural), or 0."""
+    word = words[i]
+    for key in dict.fromkeys((word, singular(word))):
+        for entry in known.get(key, ()):
+            window = words[i : i + len(entry)]
+            if len(window) == len(entry) and tuple(window[:-1]) == entry[:-1] and singular(window[-1]) == entry[-1]:
+                return len(entry)
+            if tuple(window) == entry:
+                return len(entry)
+    return 0
+
+
+def _permitted_spans(words: Sequence[str]) -> set[int]:
+    permitted: set[int] = set()
+    for i in range(len(words)):
+        for phrase in _PERMISSIONS:
+            if tuple(words[i : i + len(phrase)]) == phrase:
+                k = i + len(phrase)
+                while k < len(words) and words[k] not in _CLAUSE_END:
+                    permitted.add(k)
+                    k += 1
+        for phrase in _PERMITTED_AFTER:
+            if tuple(words[i : i + len(phrase)]) == phrase:
+                k = i - 1
+                while k >= 0 and words[k] not in _CLAUSE_END:
+                    permitted.add(k)
+                    k -= 1
+    return permitted
+
+
+def object_mentions(
+    words: Sequence[str], object_words: Iterable[str] = (), verbs: Iterable[str] = ()
+) -> list[Mention]:
+    """The objects `words` (tokens of a normalised instruction) name, in order.
+
+    Args:
+        words: lower-case tokens, punctuation as tokens ("'s" apart).
+        object_words: the registry's slot words and synonyms and the scene's object kinds (multi-word allowed).
+        verbs: lexicon verbs: after "the" they are nouns ("the base"), anywhere else not objects.
+    """
+    known = _object_words(tuple(sorted(set(object_words))))
+    verbs = set(verbs)
+    permitted = _permitted_spans(words)
+    mentions: list[Mention] = []
+    i, n = 0, len(words)
+    while i < n:
+        word = words[i]
+        if word in _DETERMINERS or word in _MODIFIERS or _possessive(words, i):
+            j = i
+            while j < n and (words[j] in _DETERMINERS or words[j] in _MODIFIERS or _possessive(words, j)):
+                j += 1
+            end = _noun_run(words, j, known, verbs)
+            found = _mention(words, i, j, end, known, permitted)
+            if found is not None:
+                mentions.append(found)
+            i = max(end, j, i + 1)
+            continue
+        length = _known_at(words, i, known)
+        previous = words[i - 1] if i else ","
+        if length and word not in _AMBIGUOUS_BARE | _NOT_OBJECTS and not (word in verbs and previous in _CLAUSE_START):
+            end = _noun_run(words, i, known, verbs)
+            found = _mention(words, i, i, end, known, permitted)
+            if found is not None:
+                mentions.append(found)
+            i = max(end, i + 1)
+            continue
+        i += 1
+    return mentions
+
+
+_PRONOUNS_BEFORE_IS = frozenset("that it there here what who he she this where which".split())
+_ADJECTIVES = frozenset(
+    """open closed shut empty full dirty clean old new broken cracked upright fallen lying standing tipped wet dry
+    hot cold warm heavy light plastic wooden metal metallic ceramic glass paper cardboard steel iron rubber
+    fragile delicate shiny dull round square flat tall short big small little large huge tiny long narrow wide
+    nice pretty ugly spare extra same different whole half favourite favorite usual""".split()
+)
+
+
+def is_adjective(word: str) -> bool:
+    """Whether a word before a noun describes it rather than naming another object ("open", "ceramic",
+    "battered"); "water" in "water bottle" or an unknown noun in a compound names a kind, and is no adjective."""
+    if word in _ADJECTIVES:
+        return True
+    if word in _COMPOUND_MODIFIERS or word in OBJECT_NOUNS:
+        return False
+    # not "-ing": "cutting board", "frying pan", "baking tray" name kinds
+    return len(word) > 4 and word.endswith(("ed", "en", "ic", "al", "ous", "ful", "less", "ive", "ish", "ble"))
+
+
+def _possessive(words: Sequence[str], i: int) -> bool:
+    """ "'s" after a noun ("the bowl's contents"); after "that", "it", "there" it is "is"."""
+    return words[i] == "'s" and i > 0 and words[i - 1] not in _PRONOUNS_BEFORE_IS
+
+
+def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
+    """End of the nouns from words[j]: known object words, and other nouns ("coffee mug", "tin can")."""
+    end = j
+    while end < len(words):
+        word = words[end]
+        more = _known_at(words, end, known)
+        if word == "can" and words[end + 1 : end + 2] in (["be"], ["you"], ["i"], ["we"], ["not"], ["now"]):
+            break  # "the mug can be moved": a modal verb
+        if more:
+            end += more
+        elif word == "can" and end > j:
+            end += 1  # "the tin can"
+        elif (
+            word.isalpha()
+            and word not in _BOUNDARY
+            and word not in _DETERMINERS
+            and word not in _MODIFIERS
+            and (word not in verbs or end == j)
+            and not word.endswith("ly")
+            and not (end > j and word.endswith(("ing", "ed")))
+            and end - j < 3
+        ):
+            end += 1
+        else:
+            break
+    return end
+
+
+def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Mention | None:
+    """The mention of words[j:end] with the modifiers of words[i:j], or None if it names no object."""
+    chunk = list(words[j:end])
+    known_ends = [k + _known_at(chunk, k, known) for k in range(len(chunk)) if _known_at(chunk, k, known)]
+    if known_ends:
+        chunk = chunk[: max(known_ends)]  # "the mug holder" -> mug: the known noun is the head
+    while chunk and chunk[-1] in _NOT_OBJECTS and not _known_at(chunk, len(chunk) - 1, known):
+        if len(chunk) > 1 and chunk[-1] in _DETACHABLE:
+            break  # "the pan lid": a lid comes off, so it is an object of its own
+        chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
+    while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
+        chunk[0] in _NOT_OBJECTS and not known_ends or is_adjective(chunk[0])
+    ):
+        chunk.pop(0)  # "the open drawer", "the fallen bottle", "the ceramic mug": the object is the noun
+    # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)
+    if not chunk or (len(chunk) == 1 and (chunk[0] in _NOT_OBJECTS or chunk[0] in _ADJECTIVES)):
+        return None  # "the left side", "they're both hot": no object
+    if _contents_after_of(words, j):
+        return None
+    if chunk in (["obstacle"], ["obstacles"]) and (
+        words[j - 1 : j] != ["the"] or words[end : end + 1] in ([":"], [","], ["is"], ["are"], ["'s"], ["include"])
+    ):
+        return None  # "counts as an obstacle", "the obstacle is the lamp": a role, not the simulator's object
+    color = size = position = None
+    said = list(words[i:j])
+    last_determiner = max((k for k, w in enumerate(said) if w in _DETERMINERS or w == "'s"), default=-1)
+    for value in said[last_determiner + 1 :]:  # "right the bottle": a verb before "the" is no attribute
+        if value in COLOURS:
+            color = color or canonical_attribute(value)
+        elif value in _POSITIONS:  # before sizes: "the middle drawer" is a place, as the parser reads it
+            position = position or value
+        elif value in SIZE_WORDS:
+            size = size or canonical_attribute(value)
+    chunk = chunk[-3:]
+    chunk[-1] = singular(chunk[-1])
+    if len(" ".join(chunk)) > MAX_NAME_CHARS:
+        return None  # no object's name is that long; a plan could not carry it either
+    return Mention(" ".join(chunk), color, size, position, j + len(chunk) - 1, bool(set(range(j, end)) & permitted))
+
+
+def _contents_after_of(words: Sequence[str], i: int) -> bool:
+    """ "a bottle of wine", "the glass of water": what a container holds is not another object."""
+    return i >= 2 and words[i - 1] == "of" and singular(words[i - 2]) in _CONTAINERS_OF
+
+
+# ---- the invariant ------------------------------------------------------------------------------------------
+
+
+def _compatible(mention: Mention, ref: ObjectRef) -> bool:
+    return all(getattr(mention, a) in (None, getattr(ref, a)) for a in ("color", "size"))
+
+
+def _exact_synonyms(skill: SkillSpec | None, k: int, registry=None) -> set[str]:
+    """The registered synonyms of slot k's object, in this skill and in every other skill with a slot of the same
+    word ("wine bottle" is the bottle's name in open_wine_bottle, so also in bottle_in_drawer)."""
+    if skill is None or k >= len(skill.slots):
+        return set()
+    word = skill.slots[k].word
+    synonyms = set(skill.slots[k].synonyms)
+    for other in registry or ():
+        synonyms |= {w for slot in other.slots if slot.word == word for w in slot.synonyms}
+    return synonyms
+
+
+def is_target(mention: Mention, plan: TaskPlan, skill: SkillSpec | None, registry=None) -> bool:
+    """The mention is (or may be) one of the plan's targets: the same noun or a registered synonym of the same
+    slot, and no attribute that tells them apart. A compound ("water bottle") is not its head's target ("bottle")."""
+    for k, target in enumerate(plan.targets):
+        synonyms = _exact_synonyms(skill, k, registry)
+        same = mention.name == target.name or (
+            target.name in synonyms and (mention.name in synonyms or singular(mention.name) in synonyms)
+        )
+        if same and _compatible(mention, target) and mention.position in (None, target.position, "other"):
+            if mention.position == "other" and target.position != "other":
+                continue
+            return True
+    return False
+
+
+def is_obstacle(mention: Mention, plan: TaskPlan) -> bool:
+    """The mention is among the plan's obstacles: the same head, no compound word the obstacle lacks ("mug" is
+    the obstacle "coffee mug"; "water bottle" is not the obstacle "bottle"), no attribute that differs."""
+    words = set(mention.name.split())
+    for obstacle in plan.obstacles:
+        theirs = set(obstacle.name.split())
+        same = mention.name == obstacle.name or (
+            (mention.head == obstacle.name.split()[-1] and words <= theirs) or (theirs <= words and len(theirs) > 0
+                                                                                 and mention.head not in OBJECT_NOUNS)
+        )
+        if same and _compatible(mention, obstacle):
+            return True
+    return False
+
+
+def enforce_mentions(
+    plan: TaskPlan, mentions: Sequence[Mention], skill: SkillSpec | None, registry=None
+) -> TaskPlan:
+    """`plan` with every mention that is neither a target nor an obstacle added as an obstacle (and a warning),
+    and obstacles the instruction permits contact with removed (and a warning)."""
+    obstacles = list(plan.obstacles)
+    warnings = list(plan.warnings)
+    for mention in mentions:
+        if mention.permitted or is_target(mention, plan, skill, registry):
+            continue
+        if is_obstacle(mention, plan.model_copy(update={"obstacles": obstacles})):
+            continue
+        obstacles.append(mention.ref())
+        warnings.append(
+            f"'{mention.phrase}' is named but is neither acted on nor said to be avoided; it is avoided"
+        )
+    permitted = [m for m in mentions if m.permitted and not is_target(m, plan, skill, registry)]
+    kept = []
+    for obstacle in obstacles:
+        if any(is_obstacle(m, plan.model_copy(update={"obstacles": [obstacle]})) for m in permitted):
+            warnings.append(f"contact with '{obstacle.phrase}' is permitted by the instruction; it is not avoided")
+        else:
+            kept.append(obstacle)
+    return plan.model_copy(update={"obstacles": kept, "warnings": warnings})
+
+
+def unaccounted(
+    plan: TaskPlan, mentions: Sequence[Mention], skill: SkillSpec | None, registry=None
+) -> list[Mention]:
+    """Mentions a plan neither acts on nor avoids (and contact with which is not permitted): what a model's
+    plan may not drop."""
+    return [
+        m for m in mentions if not m.permitted and not is_target(m, plan, skill, registry) and not is_obstacle(m, plan)
+    ]

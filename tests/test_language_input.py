@@ -1,0 +1,163 @@
+"""Issue 34, item 4: what the rules read is normalised and bounded, and typos are read with a warning."""
+
+import re
+import time
+
+import pytest
+
+from lano3dp import OfflineDecomposer
+from lano3dp.language import InputRejectedError, UnknownVerbError
+from lano3dp.language.normalize import MAX_INSTRUCTION_CHARS, normalize_instruction
+
+
+@pytest.fixture(scope="module")
+def decomposer():
+    return OfflineDecomposer()
+
+
+def reading(decomposer, instruction):
+    plan = decomposer.decompose(instruction)
+    return plan.summary(), plan.warnings
+
+
+INVISIBLE = [
+    ("put the bl\u200bock in the drawer", "U+200B ZERO WIDTH SPACE"),
+    ("put the bl\u00adock in the drawer", "U+00AD SOFT HYPHEN"),
+    ("put the blo\u200dck in the drawer", "U+200D ZERO WIDTH JOINER"),
+    ("put the \ufeffblock in the drawer", "U+FEFF ZERO WIDTH NO-BREAK SPACE"),
+    ("put the blo\u200eck in the drawer", "U+200E LEFT-TO-RIGHT MARK"),
+    ("put the blo\x07ck in the drawer", "U+0007 control"),
+]
+
+
+@pytest.mark.parametrize(("instruction", "removed"), INVISIBLE)
+def test_invisible_and_control_characters_are_removed_with_a_warning(decomposer, instruction, removed):
+    summary, warnings = reading(decomposer, instruction)
+    assert summary == "put_item_in_drawer(block, drawer)"
+    assert warnings == [f"removed 1 invisible or control character(s) from the instruction ({removed})"]
+
+
+def test_terminal_escapes_are_removed_and_full_width_letters_read_as_letters(decomposer):
+    assert reading(decomposer, "put the \x1b[31mblock\x1b[0m in the drawer") == (
+        "put_item_in_drawer(block, drawer)", ["removed 2 terminal escape sequence(s) from the instruction"],
+    )  # fmt: skip
+    assert reading(decomposer, "ｐｕｔ the ｂｌｏｃｋ in the drawer") == ("put_item_in_drawer(block, drawer)", [])
+    assert reading(decomposer, "put the block in the drawer, avoid the café mug") == (
+        "put_item_in_drawer(block, drawer); avoid cafe mug", [],
+    )  # fmt: skip
+
+
+REFUSED = [
+    ("put the bl\u043eck in the drawer", "the word 'blоck' mixes Cyrillic and Latin letters (a look-alike letter?)"),
+    ("put the block in the drawer, avoid the \u03bcug", "the word 'μug' mixes Greek and Latin letters"),
+    ("put the block in the drawer, avoid the кружка", "'кружка' is not written in Latin letters"),
+    ("put the \u202ekcolb\u202c in the drawer", "bidirectional control characters (U+202C, U+202E)"),
+]
+
+
+@pytest.mark.parametrize(("instruction", "reason"), REFUSED)
+def test_look_alike_letters_other_scripts_and_bidi_overrides_are_refused(decomposer, instruction, reason):
+    with pytest.raises(InputRejectedError, match=re.escape(reason)):
+        decomposer.decompose(instruction)
+
+
+def test_a_megabyte_instruction_is_refused_at_once_before_parsing(decomposer):
+    huge = "put the block in the drawer and avoid the mug " * 23_000  # ~1 MB
+    start = time.perf_counter()
+    with pytest.raises(InputRejectedError) as refused:
+        decomposer.decompose(huge)
+    assert time.perf_counter() - start < 0.05
+    assert f"at most {MAX_INSTRUCTION_CHARS:,} are accepted" in str(refused.value)
+    assert len(str(refused.value)) < 300  # the message quotes the start of it, not a megabyte
+    assert normalize_instruction("a" * MAX_INSTRUCTION_CHARS).text == "a" * MAX_INSTRUCTION_CHARS
+
+
+ADVERSARIAL = {
+    "repeated task": "put the block in the drawer and avoid the mug ",
+    "articles": "the ",
+    "conjunctions": "and ",
+    "cue list": "avoid the mug, ",
+    "single letters": "a b c d e ",
+    "pronouns": "avoid it ",
+    "predicates": "the mug is in the way ",
+    "unknown nouns": "the zorb, ",
+    "modifiers": "the big red left small blue ",
+    "negations": "don't open the drawer ",
+    "properties": "the glass is very fragile ",
+    "there is": "there's a mug, ",
+    "typos": "blcok ",
+    "one-anaphora": "a red one ",
+    "positions": "the bowl on the left ",
+    "between": "a mug is between the bowl and the pan ",
+    "punctuation": ".,;:!? ",
+    "one long word": "x",
+}
+
+
+def test_no_instruction_within_the_cap_takes_the_parser_more_than_about_100_ms(decomposer):
+    """Each pattern repeated to the 1,000-character cap (the shapes that made rules quadratic before). The bound
+    is the best of three runs, so a busy CI machine does not fail it; measured 13-50 ms on 2 busy cores."""
+    times = {}
+    for name, unit in ADVERSARIAL.items():
+        text = (unit * (MAX_INSTRUCTION_CHARS // len(unit) + 1))[:MAX_INSTRUCTION_CHARS]
+        best = float("inf")
+        for _ in range(3):
+            start = time.perf_counter()
+            try:
+                decomposer.decompose(text)
+            except ValueError:  # refusals are answers too
+                pass
+            best = min(best, time.perf_counter() - start)
+        times[name] = best
+    assert max(times.values()) < 0.15, times
+
+
+TYPOS = [
+    ("put the blcok in the drawer", "put_item_in_drawer(block, drawer)", "read 'blcok' as 'block' (a typo?)"),
+    ("pur the bowl into the pan", "bowl_pour(bowl, pan)", "read 'pur' as 'pour' (a typo?)"),
+    ("pour the bowl into the pna", "bowl_pour(bowl, pan)", "read 'pna' as 'pan' (a typo?)"),
+    ("put the bottle in the drawre", "bottle_in_drawer(bottle, drawer)", "read 'drawre' as 'drawer' (a typo?)"),
+    ("opne the drawer", "open_drawer(drawer)", "read 'opne' as 'open' (a typo?)"),
+    ("water the plant, avoid the vsae", "water_plants(watering can, plant); avoid vase",
+     "read 'vsae' as 'vase' (a typo?)"),
+    ("close the mircowave", "close_microwave(microwave)", "read 'mircowave' as 'microwave' (a typo?)"),
+]
+
+
+@pytest.mark.parametrize(("instruction", "summary", "warning"), TYPOS)
+def test_typos_of_known_words_are_corrected_and_the_correction_is_shown(decomposer, instruction, summary, warning):
+    assert reading(decomposer, instruction) == (summary, [warning])
+
+
+def test_real_words_are_never_corrected_into_a_skills_word(decomposer):
+    # "vase" is one letter from "base", "fish" from "dish", "fan" from "pan", "plate" from "place", "clock" from
+    # "block": all real objects (a changed letter in a short word is not read as a typo).
+    assert reading(decomposer, "put the phone on the base, avoid the vase") == (
+        "phone_on_base(phone, base); avoid vase", [],
+    )  # fmt: skip
+    plan = decomposer.decompose("pour the bowl into the pan, mind the fan, the fish and the clock")
+    assert (plan.obstacle_phrases, [w for w in plan.warnings if "typo" in w]) == (["fan", "fish", "clock"], [])
+    assert decomposer.decompose("put the plate in the drawer").target_phrases == ["plate", "drawer"]
+
+
+EVERYDAY = [
+    ("pop the block in the drawer", "put_item_in_drawer(block, drawer)", "read 'pop ... in' as 'put ... in'"),
+    ("stick the phone on its base", "phone_on_base(phone, base)", "read 'stick ... on' as 'put ... on'"),
+    ("chuck the block into the drawer", "put_item_in_drawer(block, drawer)", "read 'chuck ... into' as 'put ... into'"),
+    ("give the plant a drink", "water_plants(watering can, plant)", "read 'give ... drink' as 'water ... drink'"),
+    ("shut the microwave", "close_microwave(microwave)", None),
+]
+
+
+@pytest.mark.parametrize(("instruction", "summary", "warning"), EVERYDAY)
+def test_everyday_verbs_that_clearly_mean_a_skill_are_read_as_it_with_a_warning(
+    decomposer, instruction, summary, warning
+):
+    assert reading(decomposer, instruction) == (summary, [warning] if warning else [])
+
+
+def test_an_everyday_verb_without_its_meaning_is_refused_with_a_suggestion(decomposer):
+    with pytest.raises(UnknownVerbError, match="'smash' is not a verb any skill is asked for with; did you mean"):
+        decomposer.decompose("smash the bowl into the pan")
+    with pytest.raises(UnknownVerbError, match="'grab' is not a verb any skill is asked for with"):
+        decomposer.decompose("grab the mug")

@@ -1,0 +1,264 @@
+"""Issue 34, items 1 and 2: every object named is acted on or avoided; what cannot be accepted is refused with
+its reason. Each class is one row with the exact plan, refusal or warning."""
+
+import re
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from lano3dp import OfflineDecomposer
+from lano3dp.language import (
+    ContradictionError,
+    InstructionNotUnderstoodError,
+    NegatedCommandError,
+    SeveralTasksError,
+    UnknownVerbError,
+)
+from lano3dp.language.mentions import object_mentions
+from lano3dp.language.offline import tokenize
+from lano3dp.language.spelling import COMMON_WORDS
+from lano3dp.vocabulary import singular
+
+
+@pytest.fixture(scope="module")
+def decomposer():
+    return OfflineDecomposer()
+
+
+def reading(decomposer, instruction):
+    plan = decomposer.decompose(instruction)
+    return plan.skill, plan.target_phrases, plan.obstacle_phrases
+
+
+# ---- item 1: obstacles said in ways that name no cue verb ----------------------------------------------------
+
+
+DECLARED = [
+    # a property or a warning
+    ("Put the bottle in the drawer, the glass is fragile", ("bottle_in_drawer", ["bottle", "drawer"], ["glass"])),
+    ("The kettle is very hot; pour the bowl into the pan", ("bowl_pour", ["bowl", "pan"], ["kettle"])),
+    ("Careful, there's a vase near the drawer. Open the drawer", ("open_drawer", ["drawer"], ["vase"])),
+    # quantified and pronoun lists
+    ("Put the block in the drawer; the mug, the cup and the vase are all in the way, don't touch any of them",
+     ("put_item_in_drawer", ["block", "drawer"], ["mug", "cup", "vase"])),
+    ("Open the drawer. The lamp and the jar are both in the way.", ("open_drawer", ["drawer"], ["lamp", "jar"])),
+    # compounds that share a target's head, and "can" after a noun
+    ("Put the bottle in the drawer and avoid the water bottle",
+     ("bottle_in_drawer", ["bottle", "drawer"], ["water bottle"])),
+    ("Put the block in the drawer and keep clear of the tin can",
+     ("put_item_in_drawer", ["block", "drawer"], ["tin can"])),
+    # an unknown object word before the target: the wildcard slot takes the object of the verb
+    ("Put the block next to the teapot in the drawer", ("put_item_in_drawer", ["block", "drawer"], ["teapot"])),
+    ("Put the stapler next to the teapot in the drawer",
+     ("put_item_in_drawer", ["stapler", "drawer"], ["teapot"])),
+    # a landmark, a context sentence and an object after a negated verb are still named objects
+    ("Open the drawer under the microwave", ("open_drawer", ["drawer"], ["microwave"])),
+    ("There's a bowl next to the drawer. Open the drawer.", ("open_drawer", ["drawer"], ["bowl"])),
+    ("Don't open the drawer; pour the bowl into the pan", ("bowl_pour", ["bowl", "pan"], ["drawer"])),
+    # found by the blind table 3 (general classes, not its sentences)
+    ("Move the teapot past the block into the drawer", ("put_item_in_drawer", ["teapot", "drawer"], ["block"])),
+    ("Past the mug and the jar, put the eraser into the drawer",
+     ("put_item_in_drawer", ["eraser", "drawer"], ["mug", "jar"])),
+    ("Put the red block, not the mug, into the drawer", ("put_item_in_drawer", ["red block", "drawer"], ["mug"])),
+    ("Open the bottle; the lamp and the jar, steer clear of every one of them",
+     ("open_wine_bottle", ["bottle"], ["lamp", "jar"])),
+    ("Open the bottle but watch the teapot and the kettle, they're both hot",
+     ("open_wine_bottle", ["bottle"], ["teapot", "kettle"])),
+    ("Pour the bowl into the pan, careful with the pan lid", ("bowl_pour", ["bowl", "pan"], ["pan lid"])),
+    ("Water the plant; the trash can is right behind it",
+     ("water_plants", ["watering can", "plant"], ["trash can"])),
+    ("Pour the bowl into the pan; keep the cutting board clear",
+     ("bowl_pour", ["bowl", "pan"], ["cutting board"])),
+    ("Put the sponge in the drawer, the laptop on the left is new",
+     ("put_item_in_drawer", ["sponge", "drawer"], ["left laptop"])),
+    ("Open the flask", ("open_wine_bottle", ["bottle"], [])),  # a registered synonym of the bottle in any skill
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("instruction", "plan"), DECLARED, ids=[d[0][:40] for d in DECLARED])
+def test_every_named_object_is_a_target_or_an_obstacle(decomposer, instruction, plan):
+    assert reading(decomposer, instruction) == plan
+
+
+def test_an_object_the_parser_cannot_place_is_avoided_and_a_warning_says_so(decomposer):
+    plan = decomposer.decompose("Put the block in the drawer next to the ceramic teapot")
+    assert plan.obstacle_phrases == ["teapot"]
+    assert plan.warnings == ["'teapot' is named but is neither acted on nor said to be avoided; it is avoided"]
+
+
+PERMITTED = [
+    "Put the block in the drawer, bumping the mug is fine",
+    "Put the block in the drawer; you may touch the mug",
+    "Put the block in the drawer, don't worry about the mug",
+    "Put the block in the drawer and ignore the mug",
+    "Put the block in the drawer, the mug can be moved",
+    "Put the block in the drawer, it's fine to bump the mug",
+]
+
+
+@pytest.mark.parametrize("instruction", PERMITTED)
+def test_an_object_the_user_permits_contact_with_is_not_avoided(decomposer, instruction):
+    assert reading(decomposer, instruction) == ("put_item_in_drawer", ["block", "drawer"], [])
+
+
+def test_an_avoidance_cue_with_permitted_contact_is_dropped_with_a_warning(decomposer):
+    plan = decomposer.decompose("Put the block in the drawer, no need to avoid the mug")
+    assert plan.obstacles == []
+    assert plan.warnings == ["contact with 'mug' is permitted by the instruction; it is not avoided"]
+
+
+def test_mentions_are_found_whatever_their_role():
+    said = "the coffee mug is on the left side of the table, pour the bowl's contents into the pan near the tin can"
+    assert [m.phrase for m in object_mentions(tokenize(said), ["bowl", "pan"])] == ["coffee mug", "bowl", "pan",
+                                                                                   "tin can"]
+    assert [m.phrase for m in object_mentions(tokenize("open the bottle of wine"), ["bottle", "wine"])] == ["bottle"]
+    assert object_mentions(tokenize("water the plant"), ["plant"], ["water"])[0].phrase == "plant"
+
+
+# ---- item 2: refusals with reasons ---------------------------------------------------------------------------
+
+
+REFUSALS = [
+    (NegatedCommandError, "don't open the drawer", "'don't open the drawer' asks the robot not to do something"),
+    (NegatedCommandError, "Do not pour the bowl into the pan.", "'do not pour the bowl into the pan' asks the robot"),
+    (NegatedCommandError, "never put the block in the drawer", "'never put the block in the drawer' asks the robot"),
+    (NegatedCommandError, "Please don't move the block into the drawer", "'don't move the block into the drawer'"),
+    (SeveralTasksError, "Open the drawer and put the block in it",
+     "it asks for two tasks ('open': open_drawer, open_wine_bottle; 'put in': bottle_in_drawer, put_item_in_drawer)"),
+    (SeveralTasksError, "put the block in the drawer and close the microwave",
+     "two tasks ('put in': bottle_in_drawer, put_item_in_drawer; 'close': close_microwave)"),
+    (SeveralTasksError, "Put the block in the drawer, then close it", "'close': close_microwave"),
+    (SeveralTasksError, "Water the plant, then sweep the crumbs into the dustpan", "'water': water_plants; 'sweep'"),
+    (ContradictionError, "Put the bottle in the drawer without touching the bottle",
+     "'bottle' is the object bottle_in_drawer acts on, and 'without touching' says to keep away from it"),
+    (ContradictionError, "Pour the bowl into the pan and avoid the bowl", "'bowl' is the object bowl_pour acts on"),
+    (ContradictionError, "Put the block in the drawer and don't touch it",
+     "'don't touch it' can only mean what put_item_in_drawer acts on (block, drawer)"),
+    (NegatedCommandError, "Don't you dare put the phone on the base", "'don't you dare put the phone on the base'"),
+    (NegatedCommandError, "I don't want you to sweep the dirt into the dustpan", "'don't want you to sweep"),
+    (ContradictionError, "Stand the bottle upright while avoiding every bottle", "'bottle' is the object"),
+    # verbs of abstaining negate the task verb after them
+    (NegatedCommandError, "Refrain from opening the microwave door", "'refrain from opening the microwave door'"),
+    (NegatedCommandError, "There's no need to water the plant", "'no need to water the plant' asks the robot"),
+    (NegatedCommandError, "You needn't pour the bowl into the pan", "'needn't pour the bowl into the pan'"),
+    (NegatedCommandError, "Hold off on putting the phone on the base", "'hold off on putting the phone on the base'"),
+    (NegatedCommandError, "Don't bother sweeping the crumbs into the dustpan", "'don't bother sweeping the crumbs"),
+    (NegatedCommandError, "Skip closing the microwave", "'skip closing the microwave' asks the robot"),
+    (InstructionNotUnderstoodError, "Is the drawer open?", "it is a question, not a task"),
+    (InstructionNotUnderstoodError, "Where did you put the phone?", "it is a question, not a task"),
+    (UnknownVerbError, "Smash the bowl into the pan", "'smash' is not a verb any skill is asked for with"),
+    (UnknownVerbError, "The bowl into the pan, please", "it has no verb that asks for a task"),
+    (InstructionNotUnderstoodError, "Close the drawer", "no skill fits (verbs: close; objects: drawer)"),
+    (InstructionNotUnderstoodError, "Pour the bowl into the drawer", "'drawer' has no place in bowl_pour (bowl, pan)"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("error", "instruction", "reason"), REFUSALS, ids=[r[1][:40] for r in REFUSALS])
+def test_what_cannot_be_accepted_is_refused_naming_it(decomposer, error, instruction, reason):
+    with pytest.raises(error, match=re.escape(reason)) as refused:
+        decomposer.decompose(instruction)
+    assert "\n" not in str(refused.value)  # one line
+
+
+NOT_REFUSED = [
+    ("Put the block close to the drawer", ("put_item_in_drawer", ["block", "drawer"], [])),  # "close to": a place
+    ("Could you put the block in the drawer?", ("put_item_in_drawer", ["block", "drawer"], [])),  # a request
+    ("The drawer is open. Put the block in it.", ("put_item_in_drawer", ["block", "drawer"], [])),
+    ("Take the bowl and pour it into the pan", ("bowl_pour", ["bowl", "pan"], [])),  # one task, two verbs
+    ("Set the bottle upright", ("bottle_upright", ["bottle"], [])),
+    ("Pour the bowl into the pan, don't spill it", ("bowl_pour", ["bowl", "pan"], [])),  # care, not distance
+    ("Pour the bowl into the pan and don't touch the mug", ("bowl_pour", ["bowl", "pan"], ["mug"])),
+    ("Put the block in the drawer, no need to hurry", ("put_item_in_drawer", ["block", "drawer"], [])),
+    # an unknown word is never read as a word that names no object ("duss" as "dust"): it would be dropped
+    ("Avoid the duss and open the drawer", ("open_drawer", ["drawer"], ["duss"])),
+    # a word of a target's own name is that target, never an obstacle of its own
+    ("Put the tv remote in the drawer", ("put_item_in_drawer", ["tv remote", "drawer"], [])),
+    # an object skipped is left alone, so avoided, and never the target
+    ("Skip the green bowl and pour the red bowl into the pan", ("bowl_pour", ["red bowl", "pan"], ["green bowl"])),
+    # an adverb before an obstacle's phrase is not part of its name
+    ("Pour the bowl into the pan, and mind the kettle, particularly the toaster",
+     ("bowl_pour", ["bowl", "pan"], ["kettle", "toaster"])),
+    # "right" before a place is an adverb, so the sentence it is in asks for no task
+    ("There's a stapler right beside the drawer. Put the sponge in the drawer.",
+     ("put_item_in_drawer", ["sponge", "drawer"], ["stapler"])),
+    ("Gently put the plastic frog in the drawer past the mug", ("put_item_in_drawer", ["plastic frog", "drawer"],
+                                                              ["mug"])),
+]
+
+
+@pytest.mark.parametrize(("instruction", "plan"), NOT_REFUSED)
+def test_constructions_that_only_look_like_refusals_are_planned(decomposer, instruction, plan):
+    assert reading(decomposer, instruction) == plan
+
+
+# ---- the invariant as a property --------------------------------------------------------------------------------
+
+KNOWN_OBJECTS = ["mug", "vase", "lamp", "kettle", "cup", "glass", "plate", "jar", "candle", "toaster", "teapot"]
+# role templates: {o} is an object word; each must end up a target or an obstacle of the plan
+ROLES = [
+    "avoid the {o}",
+    "keep clear of the {o}",
+    "without touching the {o}",
+    "the {o} is in the way",
+    "the {o} is fragile",
+    "careful, there's a {o} next to the drawer",
+    "there's a {o} next to the drawer",
+    "the {o} sits on the left",
+    "watch out for the {o}",
+    "don't knock over the {o}",
+]
+TASKS = [
+    ("open the drawer", {"drawer"}),
+    ("pour the bowl into the pan", {"bowl", "pan"}),
+    ("put the block in the drawer", {"block", "drawer"}),
+    ("water the plant", {"plant"}),
+    ("close the microwave", {"microwave"}),
+]
+unknown_words = st.from_regex(r"[bdfgklmnprstvz][aeiou][bdfgklmnprstvz][aeiou]?[bdfgklmnprstvz]", fullmatch=True)
+
+
+def _object_words(decomposer):
+    return {w for s in decomposer.registry for slot in s.slots for entry in slot.synonyms for w in entry.split()}
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    task=st.sampled_from(TASKS),
+    roles=st.lists(st.sampled_from(ROLES), min_size=1, max_size=3),
+    words=st.lists(st.one_of(st.sampled_from(KNOWN_OBJECTS), unknown_words), min_size=4, max_size=4, unique=True),
+    item=st.one_of(st.just(None), unknown_words),
+    first=st.booleans(),
+)
+def test_property_every_object_word_in_any_role_is_a_target_or_an_obstacle(decomposer, task, roles, words, item,
+                                                                            first):
+    """Random object words (known and unknown) in every role around a task: each one the plan keeps is a target
+    or an obstacle, never dropped; an object said to be avoided is never a target."""
+    task_text, task_objects = task
+    # an object word is one the mention finder reads as an object in "the {w}" (not "mess", "side", "way")
+    words = [w for w in words if w not in COMMON_WORDS and w not in _object_words(decomposer)
+             and object_mentions(tokenize(f"the {w}"))]
+    if item is not None and task_text.startswith("put the block"):
+        if item in COMMON_WORDS or item in _object_words(decomposer) or item in words:
+            return
+        task_text = f"put the {item} in the drawer"
+        task_objects = {item, "drawer"}
+    clauses = [role.format(o=word) for role, word in zip(roles, words, strict=False)]
+    instruction = "; ".join([task_text, *clauses] if first else [*clauses, task_text])
+    try:
+        plan = decomposer.decompose(instruction)
+    except InstructionNotUnderstoodError:
+        return  # a refusal acts on nothing, which is safe (how often it happens is the tables' business)
+    corrected = {m.group(1): m.group(2) for w in plan.warnings if (m := re.match(r"read '(\w+)' as '(\w+)'", w))}
+    target_words = {w for t in plan.targets for w in t.name.split()}
+    obstacle_words = {w for o in plan.obstacles for w in o.name.split()}
+    slot_words = _object_words(decomposer)
+    for _, word in zip(roles, words, strict=False):
+        said = singular(corrected.get(word, word))
+        if word in corrected and said in slot_words:
+            continue  # read as a typo of a slot's word ("pabn" as "pan"): a target's name, not an unknown object
+        assert said in target_words | obstacle_words, (instruction, plan.summary())
+        assert said not in target_words, (instruction, plan.summary())  # avoided objects are never targets
+    assert task_objects & target_words or {corrected.get(w, w) for w in task_objects} & target_words, (
+        instruction, plan.summary()
+    )

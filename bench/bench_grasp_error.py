@@ -5,31 +5,28 @@ with the gripper command past half-closed; the policy's rollout gives its own fi
 difference is reported as position (cm) and yaw about the vertical, folded into [-90, 90) degrees since
 a parallel gripper closing at yaw a or a + 180 is the same grasp. Both grasps are top-down in these tasks.
 
-    OMP_NUM_THREADS=1 python bench/bench_grasp_error.py --task phone_on_base --episodes 20 \\
-        [--checkpoint RUN] [--label shipped] [--out results/grasp_error.json]
+    OMP_NUM_THREADS=1 python bench/bench_grasp_error.py --tasks phone_on_base --episodes 20 \\
+        [--policy pose_10min=bench/out/learning_pose/runs/phone_on_base_pose_seed0 --policy ...]
 
-Without --checkpoint the packaged policy of the task is measured. Results are appended (keyed by task and
-label) to the JSON, whose "commands" list names what made each entry.
+Without --policy the packaged policy of each task is measured (label "packaged"); with it, each LABEL=PATH of the
+one task given. Writes <out-dir>/grasp_error<tag>.json, entries keyed "<task>/<label>".
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
-import shlex
-import sys
-from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from lano3dp.evaluate import EpisodeRunner, EvalConfig  # noqa: E402
-from lano3dp.policy.pretrained import packaged_checkpoint  # noqa: E402
+from _contract import Unused, bench_parser, parse, relative, write_results  # noqa: E402
+from lano3dp.evaluation import EvalConfig  # noqa: E402
+from lano3dp.evaluation.episodes import EpisodeRunner  # noqa: E402
+from lano3dp.guidance.settings import guidance_preset  # noqa: E402
 
-ROOT = Path(__file__).resolve().parent.parent
 CLOSED = 0.5  # gripper command past which the fingers are closing
 
 
@@ -48,8 +45,9 @@ def first_closing(actions: np.ndarray) -> int | None:
     return int(closing[0]) if closing.size else None
 
 
-def measure(task: str, checkpoint: str, episodes: int, first_seed: int) -> list[dict]:
-    runner = EpisodeRunner(EvalConfig(checkpoint=checkpoint, task=task, episodes=1))
+def measure(task: str, checkpoint: str | None, episodes: int, first_seed: int) -> list[dict]:
+    """Per episode: the policy's first closing action against the expert's, in the scene of that seed."""
+    runner = EpisodeRunner(EvalConfig(checkpoint=checkpoint, task=task, episodes=1), guidance_preset("none"))
     env, executed = runner.env, []
     step = env.step
 
@@ -80,37 +78,37 @@ def measure(task: str, checkpoint: str, episodes: int, first_seed: int) -> list[
     return rows
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", required=True)
-    parser.add_argument("--checkpoint", default=None, help="run or checkpoint folder (default: the packaged policy)")
-    parser.add_argument("--label", default=None, help="name of this entry (default: the checkpoint's folder)")
-    parser.add_argument("--episodes", type=int, default=20)
-    parser.add_argument("--seed", type=int, default=1_000_000)
-    parser.add_argument("--out", type=Path, default=ROOT / "results" / "grasp_error.json")
-    args = parser.parse_args(argv)
-    torch.set_num_threads(1)
-
-    checkpoint = args.checkpoint or str(packaged_checkpoint(args.task))
-    label = args.label or ("packaged" if args.checkpoint is None else Path(args.checkpoint).name)
-    rows = measure(args.task, checkpoint, args.episodes, args.seed)
+def summarize(rows: list[dict]) -> dict:
     closed = [r for r in rows if r["closed"]]
     yaw = np.abs([r["yaw_error_deg"] for r in closed])
     distance = [float(np.linalg.norm(r["position_error_cm"])) for r in closed]
-    summary = {"episodes": len(rows), "closed": len(closed),
-               "median_abs_yaw_error_deg": round(float(np.median(yaw)), 1) if closed else None,
-               "share_within_15_deg": round(float(np.mean(yaw < 15)), 3) if closed else None,
-               "median_position_error_cm": round(float(np.median(distance)), 1) if closed else None,
-               "successes": sum(r["success"] for r in rows)}
-    command = "OMP_NUM_THREADS=1 python bench/bench_grasp_error.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
-    results = json.loads(args.out.read_text()) if args.out.exists() else {"commands": [], "entries": {}}
-    results["commands"] = [c for c in results["commands"] if c != command] + [command]
-    results["entries"][f"{args.task}/{label}"] = {"summary": summary, "episodes": rows, "command": command}
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    temporary = args.out.with_suffix(".json.tmp")
-    temporary.write_text(json.dumps(results, indent=2) + "\n")
-    temporary.replace(args.out)  # atomic: a killed run leaves the previous file whole
-    print(f"{args.task}/{label}: {json.dumps(summary)} -> {args.out}")
+    return {"episodes": len(rows), "closed": len(closed),
+            "median_abs_yaw_error_deg": round(float(np.median(yaw)), 1) if closed else None,
+            "share_within_15_deg": round(float(np.mean(yaw < 15)), 3) if closed else None,
+            "median_position_error_cm": round(float(np.median(distance)), 1) if closed else None,
+            "successes": sum(r["success"] for r in rows)}
+
+
+def main(argv=None) -> dict:
+    parser = bench_parser(__file__, __doc__, tasks="phone_on_base", episodes=20, seed=1_000_000,
+                          workers=Unused("it replays the expert and the policy in this process, episode by episode"))
+    parser.add_argument("--policy", action="append", default=[], metavar="LABEL=PATH",
+                        help="a run or checkpoint folder of the one task given, and its label (repeatable; default: "
+                             "the packaged policy, label packaged)")
+    args = parse(parser, argv)
+    torch.set_num_threads(1)
+    if args.policy and len(args.tasks) != 1:
+        parser.error("--policy names checkpoints of one task: give one task")
+    policies = dict(item.split("=", 1) for item in args.policy) or {"packaged": None}
+    entries = {}
+    for task in args.tasks:
+        for label, checkpoint in policies.items():
+            rows = measure(task, checkpoint, args.episodes, args.seed)
+            entries[f"{task}/{label}"] = {"checkpoint": relative(checkpoint) if checkpoint else f"packaged:{task}",
+                                          "summary": summarize(rows), "episodes": rows}
+            print(f"{task}/{label}: {json.dumps(entries[f'{task}/{label}']['summary'])}")
+    print(write_results("grasp_error", args, {"entries": entries}))
+    return entries
 
 
 if __name__ == "__main__":

@@ -18,9 +18,13 @@ around it. Over `--samples` fresh observations per setting it measures:
 for no guidance / guidance on A_k / guidance on A_0|k (the paper), over rho and S, with DDPM-100 and
 DDIM-10, plus two variants beyond the paper: MetricGradient (rho in metres per guided step,
 isotropic push) and checked execution (re-sample with doubled rho until the executed part is clear).
+Each setting is the library's "paper" preset (or "none") with the sampler and cost overrides it names
+(`Setting.settings`), sampled and costed as the runtime does.
 
-The trained policy is cached under bench/out/ (keyed by the data and training config), so re-runs
-only evaluate. Timings come from a 2-core machine shared with other jobs: treat them as rough.
+--episodes: test observations per setting, one chunk each (default 100; 16 with --quick); --seed: the seed of
+the test observations (the sampling noise uses --seed + 1). The trained policy is cached under --cache (keyed by
+the data and training config), so re-runs only evaluate. Timings come from a 2-core machine shared with other
+jobs: treat them as rough. Writes <out-dir>/bench_guidance<tag>.json and its two plots.
 
     OMP_NUM_THREADS=1 python bench/bench_guidance.py            # full run, ~15-25 min on this CPU
     OMP_NUM_THREADS=1 python bench/bench_guidance.py --quick    # smoke run, a few minutes
@@ -28,12 +32,8 @@ only evaluate. Timings come from a 2-core machine shared with other jobs: treat 
 
 from __future__ import annotations
 
-import argparse
 import hashlib
 import json
-import platform
-import shlex
-import sys
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -41,20 +41,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from _contract import ROOT, Unused, bench_parser, parse, relative, results_path, write_results
 from lano3dp.data import EpisodeStore
-from lano3dp.guidance import (
-    CheckConfig,
-    Cylinder,
-    Densified,
-    GuidanceConfig,
-    GuidanceMode,
-    checked_sample,
-    obstacle_guidance_cost,
-)
+from lano3dp.guidance import CheckConfig, Cylinder, Densified, checked_sample, obstacle_guidance_cost
 from lano3dp.guidance.diagnostics import plot_trajectories_by_scale
+from lano3dp.guidance.settings import GuidanceSettings, guidance_preset
 from lano3dp.policy import DiffusionPolicy, PolicyConfig
+from lano3dp.runtime.sampling import guidance_config
 
-ROOT = Path(__file__).resolve().parent.parent
 ROTATION_6D = np.array([1.0, 0.0, 0.0, 0.0, -1.0, 0.0], dtype=np.float32)  # gripper pointing down
 
 
@@ -195,7 +189,7 @@ def trained_policy(demo: DemoConfig, training: BenchTrainConfig, out_root: Path,
     policy = DiffusionPolicy.from_pretrained(checkpoint)
     policy.save_pretrained(final)
     info = {"train_seconds": round(seconds, 1), "seconds_per_step": round(seconds / training.steps, 4),
-            "checkpoint": _relative(final), "train_config": config.to_dict(), "cached": False}
+            "checkpoint": relative(final), "train_config": config.to_dict(), "cached": False}
     info_path.write_text(json.dumps(info, indent=2))
     return policy, info
 
@@ -203,6 +197,8 @@ def trained_policy(demo: DemoConfig, training: BenchTrainConfig, out_root: Path,
 # ---- evaluation --------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Setting:
+    """One point of the sweep, named as its row and curve are; `settings` is what it runs."""
+
     scheduler: str  # "ddpm" (100 steps) or "ddim" (10 steps)
     mode: str  # none | noisy | clean
     rho: float = 0.0
@@ -212,11 +208,22 @@ class Setting:
     clip_range: float | None = None  # guided steps' x_0 clip range (None: the scheduler's [-1, 1])
 
     @property
-    def guidance(self) -> GuidanceConfig | None:
+    def settings(self) -> GuidanceSettings:
+        """The "paper" preset (the "none" preset unguided) with the overrides this point names."""
+        changes = {"sampler.scheduler": self.scheduler, "sampler.steps": self.steps}
         if self.mode == "none":
-            return None
-        return GuidanceConfig(GuidanceMode(self.mode), self.rho, self.last_steps, push_weight=self.push_weight,
-                              guided_clip_range=self.clip_range)
+            return guidance_preset("none").with_changes(changes)
+        paper = guidance_preset("paper")
+        changes |= {"sampler.mode": self.mode, "sampler.rho": self.rho, "sampler.last_steps": self.last_steps,
+                    "sampler.push_weight": self.push_weight, "sampler.clip_range": self.clip_range,
+                    "cost.metric_push": self.cost != "paper", "cost.densify": 4 if self.cost == "metric+dense" else 1}
+        section = {"sampler": paper.sampler, "cost": paper.cost}
+        return paper.with_changes({path: value for path, value in changes.items()  # only what differs from it
+                                   if getattr(section[path.split(".")[0]], path.split(".")[1]) != value})
+
+    @property
+    def guidance(self):
+        return guidance_config(self.settings)
 
     @property
     def steps(self) -> int:
@@ -230,16 +237,20 @@ class Setting:
         return f"{self.mode} S={self.last_steps} ({', '.join(extras)})"
 
 
-def make_cost(kind: str, obstacle: Cylinder, policy: DiffusionPolicy):
-    return obstacle_guidance_cost([obstacle], densify=4 if kind == "metric+dense" else 1,
-                                  action_scale=None if kind == "paper" else policy.normalizer.scale("action")[:3])
+def make_cost(setting: Setting, obstacle: Cylinder, policy: DiffusionPolicy):
+    """The guidance cost of `setting` against the one obstacle, as the runtime's recipe builds it from the cost
+    settings (the waypoints alone: this synthetic test has no hand pose to anchor the path at)."""
+    cost = setting.settings.cost
+    return obstacle_guidance_cost([obstacle], densify=cost.densify,
+                                  action_scale=policy.normalizer.scale("action")[:3] if cost.metric_push else None)
 
 
 def sample(policy, obs, setting: Setting, cost, seed: int):
     generator = torch.Generator().manual_seed(seed)
+    sampler = setting.settings.sampler
     started = time.perf_counter()
     chunk = policy.predict_action_chunk(obs, guidance=setting.guidance, position_cost=cost,
-                                        scheduler=setting.scheduler, num_inference_steps=setting.steps,
+                                        scheduler=sampler.scheduler, num_inference_steps=sampler.steps,
                                         generator=generator)
     return chunk, time.perf_counter() - started
 
@@ -335,7 +346,8 @@ def latency(policy, obs, goals, obstacle, repeats: int) -> dict:
 
 def checked_execution(policy, obs, goals, obstacle, sweep: SweepConfig) -> dict:
     """Per observation: DDIM-10, A_0|k + MetricGradient on every step, rho doubled until the executed part is clear."""
-    cost = make_cost("metric+dense", obstacle, policy)
+    first = Setting("ddim", "clean", sweep.checked_start_rho, 100, "metric+dense", "alpha_bar", sweep.metric_clip_range)
+    cost = make_cost(first, obstacle, policy)
     config = CheckConfig(n_execute=None, min_clearance=0.0, max_tries=sweep.checked_max_tries, growth=2.0, densify=8)
     tries, successes, final_rhos, goal_errors, started = [], [], [], [], time.perf_counter()
     for index in range(len(goals)):
@@ -347,9 +359,7 @@ def checked_execution(policy, obs, goals, obstacle, sweep: SweepConfig) -> dict:
                                                 num_inference_steps=10, generator=generator)
             return chunk.actions[..., :3], chunk  # the executed part: n_action_steps actions
 
-        first = GuidanceConfig(GuidanceMode.CLEAN, sweep.checked_start_rho, 100, push_weight="alpha_bar",
-                               guided_clip_range=sweep.metric_clip_range)
-        result = checked_sample(sample_fn, obstacle, first, config)
+        result = checked_sample(sample_fn, obstacle, first.guidance, config)
         tries.append(result.tries)
         successes.append(result.success)
         final_rhos.append(result.final_scale)
@@ -403,20 +413,15 @@ def plot_results(rows: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def _relative(path: Path) -> str:
-    path = path.resolve()
-    return str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path)
-
-
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser = bench_parser(__file__, __doc__, tasks=Unused("it measures a synthetic carry task of its own"),
+                          episodes=None, seed=SweepConfig.test_seed,
+                          workers=Unused("it samples batches in this process, one torch thread"))
     parser.add_argument("--quick", action="store_true", help="fewer samples, settings and training steps (smoke run)")
     parser.add_argument("--train-steps", type=int, default=None)
-    parser.add_argument("--samples", type=int, default=None)
     parser.add_argument("--retrain", action="store_true", help="ignore the cached policy")
-    parser.add_argument("--out", type=Path, default=ROOT / "results" / "bench_guidance.json")
-    parser.add_argument("--cache", type=Path, default=ROOT / "bench" / "out")
-    args = parser.parse_args(argv)
+    parser.add_argument("--cache", type=Path, default=ROOT / "bench" / "out", help="the trained policy (cached)")
+    args = parse(parser, argv)
     torch.set_num_threads(1)  # 2 cores shared with other jobs: one thread is faster under contention
 
     demo, obstacle_config = DemoConfig(), ObstacleConfig()
@@ -425,8 +430,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.quick:
         sweep = SweepConfig(samples=16, paper_rhos=(1.0, 4.0), metric_rhos=(0.01, 0.04), latency_repeats=2,
                             checked_max_tries=3)
-    if args.samples:
-        sweep.samples = args.samples
+    if args.episodes:
+        sweep.samples = args.episodes
+    sweep.test_seed, sweep.sample_seed = args.seed, args.seed + 1
     obstacle = Cylinder(obstacle_config.center, obstacle_config.radius, held_radius=obstacle_config.held_radius,
                         margin=obstacle_config.margin)
 
@@ -434,7 +440,7 @@ def main(argv: list[str] | None = None) -> int:
     obs, goals = test_observations(sweep.samples, sweep.test_seed, demo)
     rows = []
     for setting in sweep_settings(sweep):
-        cost = make_cost(setting.cost, obstacle, policy)
+        cost = make_cost(setting, obstacle, policy)
         chunk, seconds = sample(policy, obs, setting, cost, sweep.sample_seed)
         row = asdict(setting) | {"series": setting.series} | metrics(chunk, goals, obstacle,
                                                                        policy.config.n_action_steps)
@@ -467,7 +473,7 @@ def main(argv: list[str] | None = None) -> int:
                                           "goal_error_delta")} if best else
                     "no setting reached <= 5% collisions within +2 cm goal error")
 
-    out = args.out
+    out = results_path("bench_guidance", args)
     out.parent.mkdir(parents=True, exist_ok=True)
     plot_path = out.with_suffix(".png")
     plot_results(rows, plot_path)
@@ -479,7 +485,7 @@ def main(argv: list[str] | None = None) -> int:
         "metric+dense, rho=0.01 m": Setting("ddpm", "clean", 0.01, 10, "metric+dense", clip_range=clip),
         "metric+dense, rho=0.02 m": Setting("ddpm", "clean", 0.02, 10, "metric+dense", clip_range=clip),
     }
-    trajectories = {label: sample(policy, shown, setting, make_cost(setting.cost, obstacle, policy),
+    trajectories = {label: sample(policy, shown, setting, make_cost(setting, obstacle, policy),
                                   sweep.sample_seed)[0].trajectory[..., :3].numpy()
                     for label, setting in examples.items()}
     figure6 = plot_trajectories_by_scale(trajectories, obstacle, out.with_name(out.stem + "_trajectories.png"),
@@ -487,10 +493,8 @@ def main(argv: list[str] | None = None) -> int:
                                          title="DDPM-100, S=10, 12 test observations; red: waypoint or segment "
                                                "point inside obstacle + held radius")
     report = {
-        "command": "OMP_NUM_THREADS=1 " + " ".join(shlex.quote(a) for a in [sys.executable, *sys.argv]),
         "what": __doc__.split("\n\n")[0],
-        "machine": {"python": platform.python_version(), "torch": torch.__version__, "threads": 1,
-                    "note": "2-core CPU shared with other jobs during the run; timings are rough"},
+        "note": "2-core CPU shared with other jobs during the run; timings are rough",
         "seeds": {"demos": demo.seed, "train": training.seed, "test_observations": sweep.test_seed,
                   "sampling": sweep.sample_seed},
         "demo_config": asdict(demo), "obstacle": asdict(obstacle_config) | {
@@ -500,13 +504,13 @@ def main(argv: list[str] | None = None) -> int:
         "claim_check": {"expected": "guidance on A_0|k brings collisions to <= 5% with goal error within 2 cm of "
                                     "the unguided policy", "smallest_qualifying_rho": claim},
         "latency": timing, "checked_execution": checked, "results": rows,
-        "plots": [_relative(plot_path), _relative(figure6)],
+        "plots": [plot_path.name, Path(figure6).name],  # beside the JSON
     }
-    out.write_text(json.dumps(report, indent=2) + "\n")
+    write_results("bench_guidance", args, report, kind="guidance")
     print(json.dumps({"latency": timing, "checked_execution": checked, "claim": claim}, indent=2))
     print(f"wrote {out} and {plot_path}")
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -2,32 +2,27 @@
 
 Per task, the policy packaged for it (`lano3dp eval --task T` without --checkpoint) is evaluated
   - on clean scenes (its clean success, the reference), and
-  - with a novel obstacle on the demonstrated path, by four samplers:
-        none      no guidance
-        A_k       the cost on the noisy sample A_k (the prior work the paper contrasts with), otherwise as default
-                  without the two additions of the project's own (the path costed from the hand, the push after
-                  sampling)
-        paper     the paper's form: A_0|k, DDPM-100, S = 10, the push in normalised action units (rho 4, the
-                  smallest that kept bench_guidance's synthetic paths clear), Q* from a ball of the held
-                  object's diameter round the EE point, waypoints only
-        default   the project's: A_0|k, the policy's DDIM, every step guided, rho 0.04 m per guided step
-                  (`MetricGradient`), segments densified x4, the hand and the held object as a swept body, the
-                  path costed from the hand (`AnchoredPath`) and pushed clear after sampling (`push_clear`),
-                  with the guidance the checkpoint was tuned with laid over it where it has a guidance.json,
-                  walls across gaps too narrow for the hand and a hand inside the margin free to move away
-        sphere    the default with the previous body model (a ball of the held object's diameter round the EE)
-        turned    the recommended preset with each obstacle's push turned 60 degrees round it (`TurnedPush`)
-        turned_half   turned, with half the push (rho 0.02)
-        no_walls  the default without the walls across narrow gaps and the escape from inside the margin
-  The samplers other than default, sphere and no_walls are fixed forms: a checkpoint's tuning does not change them.
-  - and, with the default, both turned samplers and no_walls (and none beside them), the harder rows of
+  - with a novel obstacle on the demonstrated path, by these samplers (library presets, `guidance.settings`,
+    plus dotted overrides; SAMPLERS below):
+        none          no guidance (preset none)
+        A_k           the cost on the noisy sample A_k, the prior work the paper contrasts with (preset a_k)
+        paper         the paper's form: A_0|k, DDPM-100, S = 10, the push in normalised units, a ball of the held
+                      object's diameter round the EE point, waypoints only (preset paper)
+        default       the project's guidance as this checkpoint was tuned (preset tuned: its guidance.json, else
+                      recommended)
+        sphere        default with the earlier body model, a ball round the EE point (obstacles.body=sphere)
+        turned        the recommended preset with each obstacle's push turned 60 degrees round it (cost.push_turn)
+        turned_half   turned, with half the push (sampler.rho=0.02)
+        no_walls      default without the walls across narrow gaps and without the escape filter
+  Only default, sphere and no_walls take a checkpoint's tuning; the others are fixed forms.
+  - and, with default, both turned samplers and no_walls (and none beside them), the harder rows of
     `--extra-variations`: a box, a cluster of two, two obstacles, one that moves (re-fitted before every chunk).
 Obstacle episodes use the first seeds from --seed (1000000) whose layout has room for the obstacles (chosen from
 the layout alone: `EvalConfig.obstacle_scenes_only`), clean ones --seed + i.
 
-Every failed episode is classified from its stages and contacts (`failure_class`). Evaluations are cached
-in --work, keyed by their configuration (a re-run only adds what is missing; delete a JSON after changing
-the runtime's code). Outputs: results/obstacles<tag>.json and .md, headed by the command.
+Every failed episode is classified from its stages and contacts (`failure_class`). Evaluations are cached in
+--work and reused while current (the same evaluation at the same `BEHAVIOUR_VERSION`: `pipeline.eval_stage`).
+Outputs: <out-dir>/obstacles<tag>.json and .md.
 
     OMP_NUM_THREADS=1 python bench/bench_obstacles.py                      # ~1.5 h on 2 cores
     OMP_NUM_THREADS=1 python bench/bench_obstacles.py --episodes 4 --tasks bowl_pour --extra-variations \
@@ -36,38 +31,55 @@ the runtime's code). Outputs: results/obstacles<tag>.json and .md, headed by the
 
 from __future__ import annotations
 
-import argparse
-import platform
-import shlex
-import sys
 import time
 from collections import Counter
-from dataclasses import asdict
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
-from lano3dp.evaluate import GUIDANCE_PRESETS, EvalConfig
-from lano3dp.jsonio import write_json
-from lano3dp.pipeline import eval_stage
-from lano3dp.policy.pretrained import packaged_checkpoint
+from _contract import bench_parser, parse, write_results
+from lano3dp.evaluation import EvalConfig, GuidanceChoice
+from lano3dp.evaluation.bundle import resolve_folder
+from lano3dp.guidance.settings import TUNED, load_guidance_tuning, resolve_guidance
+from lano3dp.pipeline import cached_eval, eval_stage
 from lano3dp.report import markdown_table, percent, wilson_interval
 
-ROOT = Path(__file__).resolve().parent.parent
-# EvalConfig fields of each sampler; a guidance mode alone is the recommended preset in that mode
+
+@dataclass(frozen=True)
+class Sampler:
+    """A guidance variant: a library preset ("tuned": the checkpoint's own tuning), dotted overrides on it, and
+    chunk filters taken out of whatever the preset (or the tuning) runs."""
+
+    preset: str
+    overrides: dict[str, Any] = field(default_factory=dict)
+    without_filters: tuple[str, ...] = ()
+
+    def choice(self, checkpoint: str | None, task: str, moving: bool) -> GuidanceChoice:
+        """The guidance of one evaluation of `checkpoint` (None: the packaged policy of `task`); a moving obstacle
+        is re-fitted before every chunk."""
+        changes = {**self.overrides, **({"obstacles.refit": True} if moving else {})}
+        if self.without_filters:
+            tuning = load_guidance_tuning(resolve_folder(checkpoint, task)) if self.preset == TUNED else None
+            runs = resolve_guidance(self.preset, changes, tuning).execution.filters
+            changes["execution.filters"] = [name for name in runs if name not in self.without_filters]
+        return GuidanceChoice(self.preset, changes)
+
+    def describe(self) -> str:
+        parts = [self.preset] + [f"{path}={value}" for path, value in self.overrides.items()]
+        return " ".join(parts) + (f" without {', '.join(self.without_filters)}" if self.without_filters else "")
+
+
 SAMPLERS = {
-    "none": {"guidance": "none"},
-    "A_k": {"guidance": {"mode": "noisy", "anchored": False, "repair_steps": 0, "hold_unclear": False,
-                         "push_turn": 0.0, "bridge_gaps": False, "escape_when_inside": False,
-                         "follow_when_stuck": False, "tuned": False}},
-    "paper": {"guidance": asdict(GUIDANCE_PRESETS["paper"]), "scheduler": "ddpm", "steps": 100,
-              "obstacle": {"body": "sphere"}},
-    "default": {"guidance": "clean"},
-    "sphere": {"guidance": "clean", "obstacle": {"body": "sphere"}},  # the default before the swept body: its ablation
+    "none": Sampler("none"),
+    "A_k": Sampler("a_k"),
+    "paper": Sampler("paper"),
+    "default": Sampler(TUNED),
+    "sphere": Sampler(TUNED, {"obstacles.body": "sphere"}),  # the default before the swept body: its ablation
     # the recommended preset with each push turned round, and that with half the push
-    "turned": {"guidance": {"mode": "clean", "push_turn": 60.0, "tuned": False}},
-    "turned_half": {"guidance": {"mode": "clean", "push_turn": 60.0, "rho": 0.02, "tuned": False}},
+    "turned": Sampler("recommended", {"cost.push_turn": 60.0}),
+    "turned_half": Sampler("recommended", {"cost.push_turn": 60.0, "sampler.rho": 0.02}),
     # the default without the walls across narrow gaps and the escape from inside the margin: their ablation
-    "no_walls": {"guidance": {"mode": "clean", "bridge_gaps": False, "escape_when_inside": False,
-                              "keep": ["bridge_gaps", "escape_when_inside"]}},
+    "no_walls": Sampler(TUNED, {"obstacles.bridge_gaps": False}, without_filters=("escape",)),
 }
 # the harder rows compare the project's own guidance with none, not prior work's forms
 EXTRA_SAMPLERS = ("none", "default", "turned", "turned_half", "no_walls")
@@ -79,7 +91,7 @@ PATH_BLOCKED_STEPS = 20
 
 def held_still_steps(episode: dict) -> int:
     """The longest run of steps the runtime held the hand because no start of a chunk kept clear (each such chunk
-    executes one step of holding; `RuntimeConfig.hold_unclear`)."""
+    executes one step of holding: the "hold" chunk filter)."""
     longest = run = 0
     for executed in episode.get("chunk_executed") or ():
         run = run + 1 if executed == 0 else 0
@@ -121,23 +133,18 @@ def failure_class(episode: dict) -> str | None:
     return "other"
 
 
-def parse_args(argv=None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--tasks", default="bowl_pour,put_item_in_drawer,bottle_in_drawer")
-    parser.add_argument("--samplers", default=",".join(SAMPLERS))
-    parser.add_argument("--episodes", type=int, default=50, help="episodes per row (obstacle rows: with obstacles)")
+def parse_args(argv=None):
+    parser = bench_parser(__file__, __doc__, tasks="bowl_pour,put_item_in_drawer,bottle_in_drawer", episodes=50,
+                          seed=1_000_000, workers=2)
+    parser.add_argument("--samplers", default=",".join(SAMPLERS), help=f"comma-separated, from {', '.join(SAMPLERS)}")
     parser.add_argument("--extra-variations", default="obstacle:moving,obstacle:2,obstacle:box,obstacle:cluster",
-                        help="harder rows, default sampler and none")
+                        help="harder rows, with the samplers of EXTRA_SAMPLERS")
     parser.add_argument("--extra-tasks", default="bowl_pour", help="tasks of the harder rows")
     parser.add_argument("--policy", action="append", default=[], metavar="TASK=PATH",
                         help="evaluate this checkpoint or training run for TASK instead of the packaged policy")
-    parser.add_argument("--seed", type=int, default=1_000_000)
-    parser.add_argument("--workers", type=int, default=2)
-    parser.add_argument("--work", default="bench/out/obstacles")
-    parser.add_argument("--tag", default="")
+    parser.add_argument("--work", default="bench/out/obstacles", help="the evaluations (cached)")
     parser.add_argument("--report-only", action="store_true", help="tabulate what --work holds")
-    return parser.parse_args(argv)
+    return parse(parser, argv)
 
 
 def row(summary: dict, episodes: list[dict], tuning: dict, clean: dict | None) -> dict:
@@ -165,7 +172,6 @@ def row(summary: dict, episodes: list[dict], tuning: dict, clean: dict | None) -
 
 def main(argv=None) -> int:
     args = parse_args(argv)
-    tasks = [t for t in args.tasks.split(",") if t]
     samplers = [s for s in args.samplers.split(",") if s]
     if unknown := sorted(set(samplers) - set(SAMPLERS)):
         raise SystemExit(f"unknown samplers {unknown}; choose from {', '.join(SAMPLERS)}")
@@ -173,37 +179,37 @@ def main(argv=None) -> int:
     extra_tasks = [t for t in args.extra_tasks.split(",") if t]
     work = Path(args.work)
     policies = dict(item.split("=", 1) for item in args.policy)
-    command = shlex.join(["python", "bench/bench_obstacles.py", *(argv if argv is not None else sys.argv[1:])])
     started = time.perf_counter()
 
     def log(message: str) -> None:
         print(f"[{time.perf_counter() - started:7.0f}s] {message}", flush=True)
 
     def evaluate(task: str, variation: str, name: str, sampler: str) -> tuple[dict, list[dict], dict] | None:
-        out = work / task / f"{name}.json"
-        options = dict(SAMPLERS[sampler])
-        obstacle = {**options.pop("obstacle", {}), "refit": "moving" in variation}
-        config = EvalConfig(checkpoint=policies.get(task) or str(packaged_checkpoint(task)), task=task,
-                            variation=variation, episodes=args.episodes, seed=args.seed, workers=args.workers,
-                            out=str(out), obstacle_scenes_only=variation != "clean", obstacle=obstacle, **options)
+        checkpoint = policies.get(task)
+        chosen = SAMPLERS[sampler]
+        config = EvalConfig(checkpoint=checkpoint, task=task, variation=variation, episodes=args.episodes,
+                            seed=args.seed, workers=args.workers, out=str(work / task / f"{name}.json"),
+                            obstacle_scenes_only=variation != "clean",
+                            guidance=chosen.choice(checkpoint, task, "moving" in variation))
         if args.report_only:
-            from lano3dp.pipeline import cached_eval
-
             result = cached_eval(config)
             if result is None:
                 return None
         else:
             log(f"{task} / {variation} / {sampler}")
-            result = eval_stage(config, log=log, command=command)
-        return result["summary"], result["episodes"], result.get("guidance_tuning") or {}
+            result = eval_stage(config, log=log, command=args.command)
+        tuning = load_guidance_tuning(resolve_folder(checkpoint, task)) if chosen.preset == TUNED else None
+        return result["summary"], result["episodes"], dict(tuning.overrides) if tuning else {}
 
-    results: dict = {"command": command, "config": vars(args), "samplers": SAMPLERS, "policies": policies, "tasks": {},
-                     "machine": {"platform": platform.platform(), "python": platform.python_version(),
-                                 "note": "2-core CPU shared with other jobs: latencies are pessimistic"}}
-    out_json = ROOT / "results" / f"obstacles{args.tag}.json"
-    out_md = ROOT / "results" / f"obstacles{args.tag}.md"
-    for task in tasks:
-        entry = results["tasks"].setdefault(task, {"rows": {}})
+    body: dict = {"samplers": {name: SAMPLERS[name].describe() for name in samplers}, "policies": policies,
+                  "tasks": {}, "note": "2-core CPU shared with other jobs: latencies are pessimistic"}
+
+    def write() -> Path:
+        body["wall_s"] = round(time.perf_counter() - started, 1)
+        return write_results("obstacles", args, body, markdown=markdown_report)
+
+    for task in args.tasks:
+        entry = body["tasks"].setdefault(task, {"rows": {}})
         clean = evaluate(task, "clean", "clean", "none")
         clean_summary = clean[0] if clean else None
         if clean:
@@ -217,12 +223,8 @@ def main(argv=None) -> int:
             if measured:
                 entry["rows"][f"{variation}/{sampler}"] = {"variation": variation, "sampler": sampler,
                                                            **row(*measured, clean_summary)}
-            results["wall_s"] = round(time.perf_counter() - started, 1)
-            write_json(out_json, results)
-            out_md.write_text(markdown_report(results))
-    write_json(out_json, results)
-    out_md.write_text(markdown_report(results))
-    log(f"done: {out_json.relative_to(ROOT)}, {out_md.relative_to(ROOT)}")
+            write()
+    log(f"done: {write()}")
     return 0
 
 
@@ -233,7 +235,7 @@ def _interval(values) -> str:
 
 def markdown_report(results: dict) -> str:
     seed = results.get("config", {}).get("seed", 1_000_000)
-    lines = ["# Obstacle avoidance that keeps the task", "", f"Command: `{results['command']}`", "",
+    lines = ["# Obstacle avoidance that keeps the task", "",
              "Policies: " + (", ".join(f"{t}: `{p}`" for t, p in results["policies"].items()) + "; others: " if
                              results["policies"] else "") +
              "the packaged ones (`src/lano3dp/checkpoints/<task>`, training seed 0, see their "

@@ -12,19 +12,17 @@ side in one run so that their ratio holds even on a busy machine:
     default    PolicyConfig() today (lano3dp.policy.config)
 
 Inference = predict_action_chunk at batch 1 of the default: DDIM-10, DDPM-100, and DDIM-10 with cost
-guidance on every step.
+guidance on every step (the recommended preset's sampler at rho 0.01).
 
-    OMP_NUM_THREADS=1 python bench/bench_policy.py [--threads 1] [--out results/bench_policy.json]
+    OMP_NUM_THREADS=1 python bench/bench_policy.py [--threads 1]
+
+Writes <out-dir>/bench_policy<tag>.json.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
-import platform
-import shlex
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -34,11 +32,12 @@ import torch
 import torch.nn.functional as F
 from torch.utils.data import default_collate
 
+from _contract import Unused, bench_parser, parse, write_results
 from lano3dp.data import EpisodeStore, SequenceDataset
-from lano3dp.guidance import GuidanceConfig
-from lano3dp.jsonio import write_json
+from lano3dp.guidance.settings import guidance_preset
 from lano3dp.policy import DiffusionPolicy, PolicyConfig
 from lano3dp.policy.checkpoint import EMA
+from lano3dp.runtime.sampling import guidance_config
 
 SLOTS = ("object_0", "object_1")
 CONFIGS = {
@@ -50,8 +49,8 @@ PARTS = ("data", "visual_forward", "state_forward", "unet_loss_forward", "unet_l
          "state_backward", "optimizer", "ema")
 
 
-def make_policy(obs_type: str, **changes) -> DiffusionPolicy:
-    torch.manual_seed(0)
+def make_policy(obs_type: str, seed: int = 0, **changes) -> DiffusionPolicy:
+    torch.manual_seed(seed)
     config = PolicyConfig(obs_type=obs_type, object_names=SLOTS if obs_type == "objects" else (), **changes)
     policy = DiffusionPolicy(config)
     stats = {"action": {"min": -np.ones(10), "max": np.ones(10)}, "state": {"min": -np.ones(11), "max": np.ones(11)}}
@@ -61,9 +60,10 @@ def make_policy(obs_type: str, **changes) -> DiffusionPolicy:
     return policy
 
 
-def random_store(path: Path, config: PolicyConfig, episodes: int = 12, length: int = 80) -> EpisodeStore:
+def random_store(path: Path, config: PolicyConfig, episodes: int = 12, length: int = 80,
+                 seed: int = 0) -> EpisodeStore:
     """A zarr store of random episodes with the keys and shapes `config` reads (the values do not matter)."""
-    rng = np.random.default_rng(0)
+    rng = np.random.default_rng(seed)
     store = EpisodeStore.create(path, attrs={"object_names": list(config.object_names)})
     visual = {"objects": (config.n_slots, config.n_points, 3), "scene": (config.scene_points, 3),
               "image": (config.image_size, config.image_size, 3)}[config.obs_type]
@@ -78,11 +78,12 @@ def random_store(path: Path, config: PolicyConfig, episodes: int = 12, length: i
     return store
 
 
-def time_training(policy: DiffusionPolicy, dataset: SequenceDataset, batch: int, steps: int) -> dict[str, float]:
+def time_training(policy: DiffusionPolicy, dataset: SequenceDataset, batch: int, steps: int,
+                  seed: int = 0) -> dict[str, float]:
     """Median CPU seconds of each part of a training step (see the module docstring)."""
     config = policy.config
-    generator = torch.Generator().manual_seed(0)
-    rng = np.random.default_rng(0)
+    generator = torch.Generator().manual_seed(seed)
+    rng = np.random.default_rng(seed)
     optimizer = torch.optim.AdamW(policy.parameters(), lr=5e-4, betas=(0.95, 0.999), weight_decay=1e-6, fused=True)
     ema = EMA(policy)
     encoder = policy.obs_encoder
@@ -121,9 +122,9 @@ def time_training(policy: DiffusionPolicy, dataset: SequenceDataset, batch: int,
     return {part: statistics.median(values) for part, values in times.items()}
 
 
-def time_inference(policy: DiffusionPolicy, repeats: int, **kwargs) -> dict[str, float]:
+def time_inference(policy: DiffusionPolicy, repeats: int, seed: int = 0, **kwargs) -> dict[str, float]:
     config = policy.config
-    generator = torch.Generator().manual_seed(0)
+    generator = torch.Generator().manual_seed(seed)
     obs = {"object_clouds": torch.rand(1, config.n_obs_steps, config.n_slots, config.n_points, 3) * 0.4 - 0.2,
            "state": torch.rand(1, config.n_obs_steps, config.state_dim) * 2 - 1}
     wall, cpu = [], []
@@ -142,28 +143,27 @@ def hinge_cost(positions: torch.Tensor) -> torch.Tensor:
 
 
 def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = bench_parser(__file__, __doc__, tasks=Unused("it times policy configurations on random data"),
+                          episodes=Unused("it times training steps and chunks: see --train-steps, --repeats"),
+                          seed=0, workers=Unused("it times one process; see --threads"))
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--batch", type=int, default=64)
     parser.add_argument("--train-steps", type=int, default=12)
     parser.add_argument("--obs-types", default="objects,scene,image")
     parser.add_argument("--repeats", type=int, default=10, help="inference repetitions (DDPM-100: a third)")
-    parser.add_argument("--out", type=Path, default=Path(__file__).resolve().parents[1] / "results" /
-                        "bench_policy.json")
-    args = parser.parse_args(argv)
+    args = parse(parser, argv)
     torch.set_num_threads(args.threads)
     load_before = os.getloadavg()
-    started = time.time()
     training: dict[str, dict] = {}
     with tempfile.TemporaryDirectory() as folder:
         for obs_type in args.obs_types.split(","):
             for name, changes in CONFIGS.items():
-                policy = make_policy(obs_type, **changes).train()
+                policy = make_policy(obs_type, seed=args.seed, **changes).train()
                 config = policy.config
-                store = random_store(Path(folder) / f"{obs_type}_{name}.zarr", config)
+                store = random_store(Path(folder) / f"{obs_type}_{name}.zarr", config, seed=args.seed)
                 dataset = SequenceDataset(store, obs_keys=config.obs_keys, n_obs_steps=config.n_obs_steps,
                                           horizon=config.horizon, n_action_steps=config.n_action_steps)
-                parts = time_training(policy, dataset, args.batch, args.train_steps)
+                parts = time_training(policy, dataset, args.batch, args.train_steps, seed=args.seed)
                 total = sum(parts.values())
                 entry = {"parameters": sum(p.numel() for p in policy.parameters()),
                          "config": {key: config.to_dict()[key] for key in ("n_points", "n_obs_steps", "down_dims",
@@ -179,36 +179,30 @@ def main(argv=None) -> None:
               training[f"{obs_type}/default"]["cpu_ms_per_sample"] for obs_type in args.obs_types.split(",")}
     print("previous / default, CPU per training sample: " + ", ".join(f"{k} {v:.2f}x" for k, v in ratios.items()))
 
-    policy = make_policy("objects").eval()
+    policy = make_policy("objects", seed=args.seed).eval()
     cases = {
         "ddim_10": dict(scheduler="ddim", num_inference_steps=10),
         "ddpm_100": dict(scheduler="ddpm", num_inference_steps=100),
         "ddim_10_guided_every_step": dict(scheduler="ddim", num_inference_steps=10, position_cost=hinge_cost,
-                                          guidance=GuidanceConfig(scale=0.01, last_steps=100)),
+                                          guidance=guidance_config(guidance_preset("recommended").with_changes(
+                                              {"sampler.rho": 0.01}))),
     }
     inference = {}
     for name, kwargs in cases.items():
         repeats = max(3, args.repeats // 3) if name.startswith("ddpm") else args.repeats
-        inference[name] = time_inference(policy, repeats, **kwargs)
+        inference[name] = time_inference(policy, repeats, seed=args.seed, **kwargs)
         print(f"inference {name}: {1000 * inference[name]['median_cpu_s']:.1f} CPU-ms", flush=True)
 
-    record = {
-        "benchmark": "bench/bench_policy.py",
-        "command": "OMP_NUM_THREADS=1 python bench/bench_policy.py " + shlex.join(sys.argv[1:] if argv is None
-                                                                                  else argv),
-        "when_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime(started)),
-        "machine": {"cpu_count": os.cpu_count(), "processor": platform.processor() or platform.machine(),
-                    "torch": torch.__version__, "threads": torch.get_num_threads(),
-                    "load_average_before": load_before, "load_average_after": os.getloadavg()},
+    path = write_results("bench_policy", args, {
         "batch": args.batch,
         "training": training,
         "previous_over_default_cpu_per_sample": ratios,
         "inference_batch1_default_objects": inference,
+        "load_average_before": load_before, "load_average_after": os.getloadavg(),
         "note": "process CPU time (all threads), medians; both configurations measured in this one run. "
                 "Backward parts: autograd stopped at the encoders' outputs, so each part is timed alone.",
-    }
-    write_json(args.out, record)
-    print(f"wrote {args.out}")
+    }, kind="policy")
+    print(f"wrote {path}")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Simulator benchmark: scripted-expert success and the cost of a control step, per task.
 
-For every registered task (or --tasks), `--episodes` seeded episodes (seeds 0..N-1, clean
+For every registered task (or --tasks), `--episodes` seeded episodes (seeds --seed + i, from 0; clean
 variation) run the scripted expert through `TabletopEnv` at 128x128 with depth + segmentation
 rendered every step in one fused pass (no RGB, `render_rgb=False`), and record:
 
@@ -14,7 +14,7 @@ rendered every step in one fused pass (no RGB, `render_rgb=False`), and record:
 With --collect N it also times `collect` of N bowl_pour episodes (object + scene clouds and
 96x96 RGB, the full dataset path) into a temporary folder.
 
-Results go to results/bench_sim.json (merged per task, so tasks can be run separately).
+Results go to <out-dir>/bench_sim<tag>.json (one run, every task asked for; give tasks run apart a --tag).
 
     OMP_NUM_THREADS=1 python bench/bench_sim.py                      # all tasks, 100 seeds each
     OMP_NUM_THREADS=1 python bench/bench_sim.py --tasks bowl_pour --episodes 20 --collect 40
@@ -22,11 +22,7 @@ Results go to results/bench_sim.json (merged per task, so tasks can be run separ
 
 from __future__ import annotations
 
-import argparse
-import json
 import os
-import platform
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -36,16 +32,15 @@ os.environ.setdefault("LP_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
 
+from _contract import Unused, bench_parser, parse, write_results  # noqa: E402
 from lano3dp.sim import TabletopEnv, task_names  # noqa: E402
 
-RESULTS = Path(__file__).resolve().parent.parent / "results" / "bench_sim.json"
 
-
-def bench_task(task: str, episodes: int, image_size: int) -> dict:
+def bench_task(task: str, episodes: int, image_size: int, first_seed: int = 0) -> dict:
     env = TabletopEnv(task, image_size=image_size, render_rgb=False)
     successes, failed, lengths, step_wall, step_cpu, reset_ms = 0, [], [], [], [], []
     try:
-        for seed in range(episodes):
+        for seed in range(first_seed, first_seed + episodes):
             t0 = time.perf_counter()
             env.reset(seed=seed)
             reset_ms.append(1000 * (time.perf_counter() - t0))
@@ -95,36 +90,27 @@ def bench_collect(episodes: int) -> dict:
                 "failed_seeds": result.failed_seeds, "image_size": 128, "n_points": 256}
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--tasks", default=None, help="comma-separated (default: every registered task)")
-    parser.add_argument("--episodes", type=int, default=100)
+def main(argv=None) -> None:
+    parser = bench_parser(__file__, __doc__, tasks=",".join(task_names()), episodes=100, seed=0,
+                          workers=Unused("it times one process; parallel episodes would share its cores"))
     parser.add_argument("--image-size", type=int, default=128)
     parser.add_argument("--collect", type=int, default=0, help="also time collecting this many episodes")
-    parser.add_argument("--out", type=Path, default=RESULTS)
-    args = parser.parse_args()
+    args = parse(parser, argv)
 
-    results = json.loads(args.out.read_text()) if args.out.exists() else {}
-    results.setdefault("tasks", {})
-    tasks = args.tasks.split(",") if args.tasks else task_names()
-    for task in tasks:
+    body: dict = {"tasks": {}, "note": "2-core machine shared with other jobs; wall times are upper bounds"}
+    for task in args.tasks:
         started = time.perf_counter()
-        results["tasks"][task] = bench_task(task, args.episodes, args.image_size)
-        entry = results["tasks"][task]
-        entry["command"] = " ".join(["python", *sys.argv])  # tasks may come from different runs
+        entry = body["tasks"][task] = bench_task(task, args.episodes, args.image_size, args.seed)
         entry["finished_utc"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
         print(f"{task:20s} success {entry['success']:.2f}  {entry['ms_per_step_median']:.2f} ms/step (median wall), "
               f"{entry['cpu_ms_per_step']:.2f} ms CPU  [{time.perf_counter() - started:.0f} s]", flush=True)
-        results["meta"] = {"command": " ".join(["python", *sys.argv]), "python": platform.python_version(),
-                           "load_average_at_end": os.getloadavg(), "cpu_count": os.cpu_count(),
-                           "note": "2-core machine shared with other jobs; wall times are upper bounds"}
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(json.dumps(results, indent=2))
+        body["load_average_at_end"] = os.getloadavg()
+        write_results("bench_sim", args, body, kind="sim")
     if args.collect:
-        results["collect"] = bench_collect(args.collect)
-        print(f"collect {args.collect} bowl_pour episodes: {results['collect']['seconds']:.1f} s wall, "
-              f"{results['collect']['cpu_seconds']:.1f} s CPU", flush=True)
-        args.out.write_text(json.dumps(results, indent=2))
+        body["collect"] = bench_collect(args.collect)
+        print(f"collect {args.collect} bowl_pour episodes: {body['collect']['seconds']:.1f} s wall, "
+              f"{body['collect']['cpu_seconds']:.1f} s CPU", flush=True)
+        write_results("bench_sim", args, body, kind="sim")
 
 
 if __name__ == "__main__":

@@ -6,23 +6,23 @@ and count it solved if the env reports success before `max_steps`. Also records 
 episode was already solved at reset (it must not be) and the wall time per episode.
 
     OMP_NUM_THREADS=1 python bench/bench_task_experts.py --tasks open_drawer,close_microwave \
-        --variations clean,instance+clutter --seeds 100 --out results/task_experts.json
+        --variations clean,instance+clutter --episodes 100
+
+Writes <out-dir>/task_experts<tag>.json.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
-import platform
 import time
-from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from _contract import Unused, bench_parser, parse, write_results  # noqa: E402
 from lano3dp.sim import TabletopEnv  # noqa: E402
 
 DEFAULT_TASKS = "open_drawer,bottle_in_drawer,close_microwave,put_item_in_drawer,phone_on_base"
@@ -43,21 +43,18 @@ def run_episode(env: TabletopEnv, seed: int, extra_steps: int = 15) -> dict:
     return {"seed": seed, "solved": solved, "solved_at_reset": at_reset, "steps": steps}
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--tasks", default=DEFAULT_TASKS)
-    parser.add_argument("--variations", default="clean")
-    parser.add_argument("--seeds", type=int, default=100)
-    parser.add_argument("--first-seed", type=int, default=0)
-    parser.add_argument("--out", default="results/task_experts.json")
-    args = parser.parse_args()
+def main(argv=None) -> None:
+    parser = bench_parser(__file__, __doc__, tasks=DEFAULT_TASKS, episodes=100, seed=0,
+                          workers=Unused("the expert's episodes run one by one in this process, timed"))
+    parser.add_argument("--variations", default="clean", help="comma-separated scene variations")
+    args = parse(parser, argv)
 
     results = []
-    for task in args.tasks.split(","):
+    for task in args.tasks:
         for variation in args.variations.split(","):
             env = TabletopEnv(task, variation=variation, image_size=16, render_rgb=False)
             start = time.perf_counter()
-            episodes = [run_episode(env, seed) for seed in range(args.first_seed, args.first_seed + args.seeds)]
+            episodes = [run_episode(env, seed) for seed in range(args.seed, args.seed + args.episodes)]
             elapsed = time.perf_counter() - start
             env.close()
             row = {
@@ -72,13 +69,9 @@ def main() -> None:
             }
             results.append(row)
             print(json.dumps(row), flush=True)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    meta = {"command": "python bench/bench_task_experts.py " + " ".join(
-                f"--{k.replace('_', '-')} {v}" for k, v in vars(args).items()),
-            "mujoco": mujoco.__version__, "python": platform.python_version(),
-            "note": "wall times on a shared 2-core machine with other jobs running: upper bounds"}
-    out.write_text(json.dumps({"meta": meta, "results": results}, indent=2))
+    write_results("task_experts", args, {
+        "results": results, "mujoco": mujoco.__version__,
+        "note": "wall times on a shared 2-core machine with other jobs running: upper bounds"})
 
 
 if __name__ == "__main__":

@@ -70,7 +70,10 @@ def provenance_line(data: dict) -> str:
     """'Made at commit 0123456789 on 2026-12-04, behaviour version 1.' (or what the file records of it)."""
     made = made_by(data)
     if made.get("commit"):
-        where = f"Made at commit `{made['commit'][:10]}`" + (" with uncommitted changes" if made.get("dirty") else "")
+        where = f"Made at commit `{made['commit'][:10]}`"
+        if made.get("landed_in"):  # a development commit that did not land as such (docs/compat.md)
+            where += f" (a development branch's, landed as `{made['landed_in'][:10]}`)"
+        where += " with uncommitted changes" if made.get("dirty") else ""
     elif made.get("committed_in"):
         where = (f"Made before results recorded their commit; last changed in commit `{made['committed_in'][:10]}`"
                  " before `lano3dp migrate` converted it")

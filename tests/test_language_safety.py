@@ -73,6 +73,25 @@ DECLARED = [
     ("Put the sponge in the drawer, the laptop on the left is new",
      ("put_item_in_drawer", ["sponge", "drawer"], ["left laptop"])),
     ("Open the flask", ("open_wine_bottle", ["bottle"], [])),  # a registered synonym of the bottle in any skill
+    # found by the blind table 5 (general classes, not its sentences)
+    ("Open the drawer; the mugs are everywhere, careful of all of them", ("open_drawer", ["drawer"], ["mug"])),
+    ("Put the block in the drawer, cups all over so be careful", ("put_item_in_drawer", ["block", "drawer"],
+                                                                ["cup"])),
+    ("Open the bottle that rolled over near the kettle", ("open_wine_bottle", ["bottle"], ["kettle"])),
+    ("The thermos is hot, water the plant", ("water_plants", ["watering can", "plant"], ["thermos"])),
+    ("Put the toy truck in the drawer", ("put_item_in_drawer", ["toy truck", "drawer"], [])),
+    ("Place the toy train into the drawer, avoid the lamp", ("put_item_in_drawer", ["toy train", "drawer"],
+                                                            ["lamp"])),
+    ("Water the orchid", ("water_plants", ["watering can", "plant"], [])),  # a kind of the slot's object
+    ("Water the plant, the cactus beside it is prickly", ("water_plants", ["watering can", "plant"], ["cactus"])),
+    ("Pour the bowl into the pan, mind the adjacent kettle", ("bowl_pour", ["bowl", "pan"], ["kettle"])),
+    ("Open the drawer, watch the lamp its new", ("open_drawer", ["drawer"], ["lamp"])),
+    ("The stapler belongs in the drawer", ("put_item_in_drawer", ["stapler", "drawer"], [])),
+    ("So the block goes into the drawer, avoid the mug", ("put_item_in_drawer", ["block", "drawer"], ["mug"])),
+    ("Hi robot, would you mind closing the microwave", ("close_microwave", ["microwave"], [])),
+    ("Set the phone onto the charging station", ("phone_on_base", ["phone", "base"], [])),
+    ("Put the left block in the drawer, not the small one",
+     ("put_item_in_drawer", ["left block", "drawer"], ["small block"])),
 ]  # fmt: skip
 
 
@@ -94,6 +113,8 @@ PERMITTED = [
     "Put the block in the drawer and ignore the mug",
     "Put the block in the drawer, the mug can be moved",
     "Put the block in the drawer, it's fine to bump the mug",
+    "Put the block in the drawer; it's okay if you nudge the mug",
+    "Put the block in the drawer, you can knock the mug",
 ]
 
 
@@ -145,6 +166,9 @@ REFUSALS = [
     (NegatedCommandError, "Hold off on putting the phone on the base", "'hold off on putting the phone on the base'"),
     (NegatedCommandError, "Don't bother sweeping the crumbs into the dustpan", "'don't bother sweeping the crumbs"),
     (NegatedCommandError, "Skip closing the microwave", "'skip closing the microwave' asks the robot"),
+    (NegatedCommandError, "I wish you didn't open the drawer", "'didn't open the drawer' asks the robot"),
+    (NegatedCommandError, "You won't need to sweep the crumbs", "'won't need to sweep the crumbs' asks the robot"),
+    (NegatedCommandError, "We'd rather not pour the bowl into the pan", "'not pour the bowl into the pan'"),
     (InstructionNotUnderstoodError, "Is the drawer open?", "it is a question, not a task"),
     (InstructionNotUnderstoodError, "Where did you put the phone?", "it is a question, not a task"),
     (UnknownVerbError, "Smash the bowl into the pan", "'smash' is not a verb any skill is asked for with"),

@@ -45,7 +45,10 @@ _STOPWORDS = frozenset("the a an this that these those some my our your its of o
 _TOKEN = re.compile(r"[a-z0-9]+")
 
 
-_PLURAL_ONLY = frozenset("scissors tongs pliers tweezers shears binoculars headphones".split())
+# Kept as they are: plural-only nouns, and singular nouns that end in "s" ("thermos" is no plural of "thermo").
+_PLURAL_ONLY = frozenset(
+    "scissors tongs pliers tweezers shears binoculars headphones thermos canvas lens atlas".split()
+)
 
 
 @functools.lru_cache(maxsize=8192)

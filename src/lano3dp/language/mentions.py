@@ -21,7 +21,7 @@ What is a mention:
 from __future__ import annotations
 
 import functools
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
 from lano3dp.language.plan import MAX_NAME_CHARS, ObjectRef, TaskPlan
@@ -38,7 +38,7 @@ _POSITIONS = frozenset(
 )
 _MODIFIERS = COLOURS | SIZE_WORDS.keys() | _POSITIONS
 # Nothing to act on or avoid: surfaces under everything, parts of objects, contents, places, people, vagueness.
-_NOT_OBJECTS = frozenset(
+NOT_OBJECTS = frozenset(
     """table counter countertop worktop floor surface desk workspace shelf lid handle door knob cap cork rim edge
     spout neck stem side corner top bottom front back inside outside middle centre center left right area spot
     place way path route direction time water liquid soup drink contents content stuff dirt dust crumb crumbs mess
@@ -67,7 +67,9 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("may", "move"), ("can", "move"), ("ok", "to"), ("okay", "to"), ("fine", "to"), ("alright", "to"),
     ("free", "to"), ("don't", "worry", "about"), ("dont", "worry", "about"), ("do", "not", "worry", "about"),
     ("no", "need", "to", "avoid"), ("ignore",), ("doesn't", "matter"), ("does", "not", "matter"),
-    ("allowed", "to", "touch"), ("contact", "with"),
+    ("allowed", "to", "touch"), ("contact", "with"), ("may", "knock"), ("can", "knock"), ("may", "brush"),
+    ("can", "brush"), ("may", "nudge"), ("can", "nudge"), ("fine", "if"), ("ok", "if"), ("okay", "if"),
+    ("alright", "if"), ("matter", "if"),
 )  # fmt: skip
 # Said after an object, permitting contact with it ("the mug can be moved", "the mug may be touched").
 _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
@@ -172,8 +174,12 @@ def object_mentions(
     permitted = _permitted_spans(words)
     mentions: list[Mention] = []
     i, n = 0, len(words)
+    last_end = -1  # where the last noun phrase ended: "that" right there is a relative pronoun ("the bottle that fell")
     while i < n:
         word = words[i]
+        if word == "that" and i == last_end:
+            i += 1
+            continue
         if word in _DETERMINERS or word in _MODIFIERS or _possessive(words, i):
             j = i
             while j < n and (words[j] in _DETERMINERS or words[j] in _MODIFIERS or _possessive(words, j)):
@@ -182,15 +188,18 @@ def object_mentions(
             found = _mention(words, i, j, end, known, permitted)
             if found is not None:
                 mentions.append(found)
+                last_end = end
             i = max(end, j, i + 1)
             continue
         length = _known_at(words, i, known)
         previous = words[i - 1] if i else ","
-        if length and word not in _AMBIGUOUS_BARE | _NOT_OBJECTS and not (word in verbs and previous in _CLAUSE_START):
+        ambiguous = word in _AMBIGUOUS_BARE and not _bare_plural_noun(words, i)
+        if length and not ambiguous and word not in NOT_OBJECTS and not (word in verbs and previous in _CLAUSE_START):
             end = _noun_run(words, i, known, verbs)
             found = _mention(words, i, i, end, known, permitted)
             if found is not None:
                 mentions.append(found)
+                last_end = end
             i = max(end, i + 1)
             continue
         i += 1
@@ -202,7 +211,8 @@ _ADJECTIVES = frozenset(
     """open closed shut empty full dirty clean old new broken cracked upright fallen lying standing tipped wet dry
     hot cold warm heavy light plastic wooden metal metallic ceramic glass paper cardboard steel iron rubber
     fragile delicate shiny dull round square flat tall short big small little large huge tiny long narrow wide
-    nice pretty ugly spare extra same different whole half favourite favorite usual""".split()
+    nice pretty ugly spare extra same different whole half favourite favorite usual neighbouring neighboring
+    adjacent nearby""".split()
 )
 
 
@@ -215,6 +225,16 @@ def is_adjective(word: str) -> bool:
         return False
     # not "-ing": "cutting board", "frying pan", "baking tray" name kinds
     return len(word) > 4 and word.endswith(("ed", "en", "ic", "al", "ous", "ful", "less", "ive", "ish", "ble"))
+
+
+def _bare_plural_noun(words: Sequence[str], i: int) -> bool:
+    """ "there are glasses everywhere", "cups all over": a plural needs no determiner to name objects. Not a verb
+    with its subject before it or its object after it ("it blocks the way", "the broom brushes dirt")."""
+    word = words[i]
+    if singular(word) == word or singular(word) not in _AMBIGUOUS_BARE | {word.removesuffix("es")}:
+        return False
+    previous, following = (words[i - 1] if i else ","), (words[i + 1] if i + 1 < len(words) else ".")
+    return previous not in _PRONOUNS_BEFORE_IS and following not in _DETERMINERS and following not in _MODIFIERS
 
 
 def _possessive(words: Sequence[str], i: int) -> bool:
@@ -256,16 +276,16 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     known_ends = [k + _known_at(chunk, k, known) for k in range(len(chunk)) if _known_at(chunk, k, known)]
     if known_ends:
         chunk = chunk[: max(known_ends)]  # "the mug holder" -> mug: the known noun is the head
-    while chunk and chunk[-1] in _NOT_OBJECTS and not _known_at(chunk, len(chunk) - 1, known):
+    while chunk and chunk[-1] in NOT_OBJECTS and not _known_at(chunk, len(chunk) - 1, known):
         if len(chunk) > 1 and chunk[-1] in _DETACHABLE:
             break  # "the pan lid": a lid comes off, so it is an object of its own
         chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
     while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
-        chunk[0] in _NOT_OBJECTS and not known_ends or is_adjective(chunk[0])
+        chunk[0] in NOT_OBJECTS and not known_ends or is_adjective(chunk[0])
     ):
         chunk.pop(0)  # "the open drawer", "the fallen bottle", "the ceramic mug": the object is the noun
     # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)
-    if not chunk or (len(chunk) == 1 and (chunk[0] in _NOT_OBJECTS or chunk[0] in _ADJECTIVES)):
+    if not chunk or (len(chunk) == 1 and (chunk[0] in NOT_OBJECTS or chunk[0] in _ADJECTIVES)):
         return None  # "the left side", "they're both hot": no object
     if _contents_after_of(words, j):
         return None
@@ -314,14 +334,21 @@ def _exact_synonyms(skill: SkillSpec | None, k: int, registry=None) -> set[str]:
     return synonyms
 
 
-def is_target(mention: Mention, plan: TaskPlan, skill: SkillSpec | None, registry=None) -> bool:
+def is_target(
+    mention: Mention, plan: TaskPlan, skill: SkillSpec | None, registry=None, typed: Mapping[int, str] | None = None
+) -> bool:
     """The mention is (or may be) one of the plan's targets: the same noun or a registered synonym of the same
-    slot, and no attribute that tells them apart. A compound ("water bottle") is not its head's target ("bottle")."""
+    slot, and no attribute that tells them apart. A compound ("water bottle") is not its head's target ("bottle").
+    With `typed` (slot index -> the word the user named that target with), another specific synonym names another
+    object ("water the plant, the cactus is prickly")."""
     for k, target in enumerate(plan.targets):
         synonyms = _exact_synonyms(skill, k, registry)
+        name = singular(mention.name)
         same = mention.name == target.name or (
-            target.name in synonyms and (mention.name in synonyms or singular(mention.name) in synonyms)
+            target.name in synonyms and (mention.name in synonyms or name in synonyms)
         )
+        if same and typed and k in typed and name not in (typed[k], target.name) and mention.name != typed[k]:
+            continue
         if same and _compatible(mention, target) and mention.position in (None, target.position, "other"):
             if mention.position == "other" and target.position != "other":
                 continue
@@ -345,14 +372,15 @@ def is_obstacle(mention: Mention, plan: TaskPlan) -> bool:
 
 
 def enforce_mentions(
-    plan: TaskPlan, mentions: Sequence[Mention], skill: SkillSpec | None, registry=None
+    plan: TaskPlan, mentions: Sequence[Mention], skill: SkillSpec | None, registry=None,
+    typed: Mapping[int, str] | None = None,
 ) -> TaskPlan:
     """`plan` with every mention that is neither a target nor an obstacle added as an obstacle (and a warning),
-    and obstacles the instruction permits contact with removed (and a warning)."""
+    and obstacles the instruction permits contact with removed (and a warning). `typed`: see `is_target`."""
     obstacles = list(plan.obstacles)
     warnings = list(plan.warnings)
     for mention in mentions:
-        if mention.permitted or is_target(mention, plan, skill, registry):
+        if mention.permitted or is_target(mention, plan, skill, registry, typed):
             continue
         if is_obstacle(mention, plan.model_copy(update={"obstacles": obstacles})):
             continue

@@ -50,7 +50,7 @@ from lano3dp.language.exceptions import (
     UnknownVerbError,
 )
 from lano3dp.language.grounding import ground_plan
-from lano3dp.language.mentions import Mention, enforce_mentions, object_mentions
+from lano3dp.language.mentions import NOT_OBJECTS, Mention, enforce_mentions, object_mentions
 from lano3dp.language.normalize import normalize_instruction
 from lano3dp.language.plan import MAX_NAME_CHARS, MAX_OBSTACLES, ObjectRef, TaskPlan
 from lano3dp.language.registry import (
@@ -95,6 +95,11 @@ _COLLISION_VERBS = frozenset(
     """touch hit bump knock disturb topple collide crash brush graze nudge move tip spill strike smash break
     jostle upset rattle scrape scratch damage push shove bang clip snag contact run go come""".split()
 )
+_PHRASE_ENDS = frozenset(", and or from to near next beside away inside".split())
+# Adjectives that place an object relative to others, never part of its name.
+_RELATIONAL_ADJECTIVES = frozenset("neighbouring neighboring adjacent nearby".split())
+# Words after an object word that are not the head of a compound with it ("water the plant today").
+_NOT_HEADS = frozenset("today tonight tomorrow again first too also instead yet still already soon later".split())
 _PARTICLES = frozenset("over into against with on off near to close next too by past around of".split())
 _PRONOUNS = {
     ("it",): "it", ("that",): "it", ("this",): "it", ("that", "one"): "it", ("this", "one"): "it",
@@ -104,7 +109,9 @@ _PRONOUNS = {
 }  # fmt: skip
 _LIST_SEPARATORS = frozenset({"and", "or", ",", "nor", "plus"})
 _CLAUSE_ENDS = frozenset({"then", "while", "but", "before", "after", "when", "so", "once", "until", "because"})
-_POLITE = frozenset("please could would can will you robot okay ok now i need want to like kindly go ahead".split())
+_POLITE = frozenset(
+    "please could would can will you robot okay ok now i need want to like kindly go ahead hey hi hello um uh".split()
+)
 _COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands stand lies lie".split())
 _PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
 _WARNINGS = frozenset("careful caution warning attention heads".split())
@@ -119,9 +126,10 @@ _GENERIC_VERBS = frozenset("put place set move take get bring transfer drop rest
 # Verbs of abstaining are negators too ("refrain from putting", "skip opening", "no need to sweep", "you needn't
 # open", "hold off on pouring"): each only when a task verb follows, so "skip the red block" is no negation.
 _NEGATORS = frozenset(
-    "don't dont never cannot can't shouldn't mustn't needn't neednt refrain skip stop quit cease abstain".split()
+    """don't dont didn't didnt doesn't doesnt won't wouldn't wouldnt never cannot can't shouldn't mustn't needn't
+    neednt refrain skip stop quit cease abstain""".split()
 )
-_NOT_AFTER = frozenset("do does please must should try better need".split())
+_NOT_AFTER = frozenset("do does please must should try better need rather".split())  # "I'd rather not open ..."
 _NEGATION_FILLER = frozenset(
     "you ever even please try to go and just accidentally dare want need wish from on with bother bothering".split()
 )
@@ -330,13 +338,14 @@ class OfflineDecomposer:
         self._check_fit(instruction, skill, parse)
         self._resolve_references(instruction, skill, parse)
         targets, target_nouns = self._fill_slots(skill, parse.nouns)
-        obstacles = self._drop_targets(instruction, skill, targets, parse)
+        typed = {k: noun.name for k, noun in target_nouns.items()}
+        obstacles = self._drop_targets(instruction, skill, targets, parse, set(typed.values()))
         _check_obstacle_count(instruction, obstacles)
         plan = TaskPlan(skill=skill.name, targets=targets, obstacles=obstacles, warnings=parse.warnings)
         # a mention among a target's own words is that target ("the remote control", "the rubber duck")
-        target_words = {i for noun in target_nouns for i in range(noun.index, max(noun.end, noun.index + 1))}
+        target_words = {i for noun in target_nouns.values() for i in range(noun.index, max(noun.end, noun.index + 1))}
         mentions = [m for m in parse.mentions if m.index not in target_words]
-        plan = enforce_mentions(plan, mentions, skill, self.registry)
+        plan = enforce_mentions(plan, mentions, skill, self.registry, typed)
         _check_obstacle_count(instruction, plan.obstacles)
         if scene_objects is not None:
             plan = self.ground(plan, scene_objects)
@@ -377,7 +386,7 @@ class OfflineDecomposer:
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         words, read_as = self._read_words(words, vocabulary)
-        words = _front_positions(words)
+        words = _front_positions(_declared_placements(_polite_requests(words)))
         mentions = object_mentions(words, [*self._vocabulary, *scene_kinds], self._single_verbs)
         words = self._resolve_one_anaphora(words, vocabulary)
         parse = Parse(tokens=list(words), warnings=[*normalized.warnings, *read_as], mentions=mentions)
@@ -515,8 +524,10 @@ class OfflineDecomposer:
             modifier = words[i - 1]
             group = COLOURS if modifier in COLOURS else SIZE_WORDS.keys() if modifier in SIZE_WORDS else POSITION_WORDS
             same = [noun for noun, modifiers in earlier if modifier in modifiers]
-            alike = [noun for noun, modifiers in earlier if modifiers & group]  # "the red block ... the blue one"
-            words[i] = (same or alike or [earlier[-1][0]])[-1]
+            # "the red block ... the blue one"
+            alike = [noun for noun, modifiers in earlier if modifiers.intersection(group)]
+            described = [noun for noun, modifiers in earlier if modifiers]  # "the left block ... the small one"
+            words[i] = (same or alike or described or [earlier[-1][0]])[-1]
             said = sorted([*said, (i, words[i], {modifier})])
         return words
 
@@ -777,7 +788,11 @@ class OfflineDecomposer:
                     break
                 continue
             if word in DETERMINERS:
+                if nouns:
+                    break  # "the teacup its my favourite": a second determiner starts another phrase
                 continue
+            if not nouns and word in _RELATIONAL_ADJECTIVES:
+                continue  # "the neighbouring vase" is a vase
             if not nouns and not after_determiner and len(word) > 5 and word.endswith("ly"):
                 continue  # "especially the vase", "particularly the lamp": an adverb before the phrase
             if word in POSITION_WORDS and not nouns and (word != "middle" or after_determiner):
@@ -854,6 +869,9 @@ class OfflineDecomposer:
                 i += 1
                 continue
             end = i + len(match.split())
+            if self._modifies_next_noun(task, end, verb_positions):
+                i += 1  # "the toy car" is a car: read below as a noun of its own, never as the slot's "toy"
+                continue
             color, size, position = self._modifiers(task, i)
             nouns.append(_Noun(match, color, size, known=True, index=i, end=end, position=position))
             used.update(range(i, end))
@@ -883,6 +901,24 @@ class OfflineDecomposer:
                     )
                     used.update(chunk)
         return sorted(nouns, key=lambda n: n.index)
+
+    def _modifies_next_noun(self, task: list[str], end: int, verb_positions: set[int]) -> bool:
+        """Whether the word at `end`, right after a known object word, is the head of their compound: a word the
+        rules do not know (or a table object that is no skill's), ending the noun phrase ("toy car in ...")."""
+        if end >= len(task) or end in verb_positions:
+            return False
+        head = task[end]
+        if head in NOT_OBJECTS or head in _NOT_HEADS or head.endswith("ly"):
+            return False  # "the drawer handle", "the plant today", "the toy quickly"
+        if head.endswith(("s", "ed", "ing")) and head not in OBJECT_NOUNS:
+            return False  # "the drawer ends up open", "the block stays": a verb after its subject
+        unknown = head not in self._known_words
+        table_object = head in OBJECT_NOUNS and head not in self._vocabulary and head not in _NON_OBJECTS
+        if not head.isalpha() or not (unknown or table_object):
+            return False
+        after = task[end + 1] if end + 1 < len(task) else "."
+        # what may end such a phrase; not a particle ("the bottle fell over", "the drawer ends up open")
+        return after in _SENTENCE_END or after in _DESTINATIONS | _PHRASE_ENDS
 
     @staticmethod
     def _vocabulary_match(task: list[str], i: int, vocabulary: Sequence[str]) -> str | None:
@@ -1116,8 +1152,8 @@ class OfflineDecomposer:
 
     # ---- step 4: slots and scene ------------------------------------------------------------
 
-    def _fill_slots(self, skill: SkillSpec, nouns: list[_Noun]) -> tuple[list[ObjectRef], list[_Noun]]:
-        """The targets in slot order (a slot nothing fills takes its word), and the nouns that filled slots."""
+    def _fill_slots(self, skill: SkillSpec, nouns: list[_Noun]) -> tuple[list[ObjectRef], dict[int, _Noun]]:
+        """The targets in slot order (a slot nothing fills takes its word), and the noun that filled each slot."""
         assigned, _ = self._assign(skill, nouns)
         targets = []
         for k, slot in enumerate(skill.slots):
@@ -1127,19 +1163,26 @@ class OfflineDecomposer:
             noun, wildcard = assigned[k]
             keep_own_name = wildcard or (slot.accepts_any and not _exact(slot, noun.name))
             targets.append(noun.ref(None if keep_own_name else slot.word))
-        return targets, [noun for noun, _ in assigned.values()]
+        return targets, {k: noun for k, (noun, _) in assigned.items()}
 
     @staticmethod
-    def _drop_targets(instruction: str, skill: SkillSpec, targets: list[ObjectRef], parse: Parse) -> list[ObjectRef]:
+    def _drop_targets(
+        instruction: str, skill: SkillSpec, targets: list[ObjectRef], parse: Parse, typed: set[str]
+    ) -> list[ObjectRef]:
         """Obstacles without those that are a target. Care said of a target ("pour the bowl into the pan, don't
         spill the bowl", "the bowl is hot") is kept as a warning; distance from it ("without touching the
-        bottle", "avoid the bowl") is a contradiction, refused."""
+        bottle", "avoid the bowl") is a contradiction, refused. A slot's synonym other than the word the target was
+        typed with and other than the slot word names another object ("water the plant, the fern is fragile")."""
         kept = []
         for obstacle in parse.obstacles:
             same = [
                 t
                 for slot, t in zip(skill.slots, targets, strict=True)
-                if (_exact(slot, obstacle.name) and slot.matches(t.name) or obstacle.name == t.name)
+                if (
+                    _exact(slot, obstacle.name) and slot.matches(t.name)
+                    and (obstacle.name in typed or obstacle.name == slot.word or not typed & set(slot.synonyms))
+                    or obstacle.name == t.name
+                )
                 and obstacle.position != "other"
                 and all(getattr(obstacle, a) in (None, getattr(t, a)) for a in ("color", "size", "position"))
             ]
@@ -1245,6 +1288,31 @@ _POST_POSITIONS = {
     ("in", "the", "centre"): "centre", ("in", "the", "center"): "center", ("nearest",): "nearest",
     ("closest",): "closest", ("farthest",): "farthest", ("furthest",): "furthest",
 }  # fmt: skip
+
+
+def _polite_requests(words: list[str]) -> list[str]:
+    """ "would you mind opening the bottle" asks for the task: "mind" there is politeness, not the obstacle cue of
+    "mind the mug", and the gerund is the verb."""
+    out = list(words)
+    for i in range(1, len(out) - 1):
+        if out[i] == "mind" and out[i - 1] == "you" and out[i + 1].endswith("ing"):
+            out[i] = "please"
+    return out
+
+
+def _declared_placements(words: list[str]) -> list[str]:
+    """ "the spatula goes in the drawer" -> "put the spatula in the drawer": a placement said as a fact about the
+    object (a determiner starting its clause) asks for it to be put there."""
+    out = list(words)
+    for i in range(len(out) - 1, 0, -1):
+        if out[i] not in ("goes", "belongs") or out[i + 1 : i + 2] not in (["in"], ["into"], ["on"], ["onto"]):
+            continue
+        start = i
+        while start > 0 and out[start - 1] not in _SENTENCE_END | {",", "so", "and", "then", "ok", "okay"}:
+            start -= 1
+        if out[start] in DETERMINERS and start < i - 1:
+            out[start:i + 1] = ["put", *out[start:i]]
+    return out
 
 
 def _front_positions(words: list[str]) -> list[str]:

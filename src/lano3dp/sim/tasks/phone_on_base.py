@@ -62,7 +62,8 @@ class PhoneOnBase(Task):
     )
     synonyms = {
         "phone": ("cellphone", "cell phone", "smartphone", "mobile", "mobile phone", "handset", "telephone"),
-        "base": ("dock", "cradle", "charger", "charging base", "charging dock", "station"),
+        "base": ("dock", "cradle", "charger", "charging base", "charging dock", "station",
+                 "charging pad", "charging station", "charging stand", "wireless charger"),
     }
     carried = "phone"
 

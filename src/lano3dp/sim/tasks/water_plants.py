@@ -76,7 +76,9 @@ class WaterPlants(Task):
     stages = ("reached_can", "grasped", "lifted", "over_plant", "tilted", "watered")
     description = "pour water on the plant with the watering can"
     verbs = ("water", "irrigate", "sprinkle", "give water", "pour water")
-    synonyms = {"watering can": ("sprinkler", "watering jug"), "plant": ("flower", "houseplant")}
+    synonyms = {"watering can": ("sprinkler", "watering jug"), "plant": (
+        "flower", "houseplant", "potted plant", "fern", "succulent", "cactus", "orchid", "herb", "basil", "bonsai",
+        "seedling", "sapling")}
     carried = "watering can"
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:

@@ -51,6 +51,20 @@ def test_blind_table_3_plans_exactly_and_safely():
     assert score.exact >= 170, score.wrong
 
 
+@pytest.mark.parametrize(("table", "rows", "refusals", "exact"), [
+    # first runs, held out (tests/data/score_blind.py): table 4 105/120, table 5 102/120; these are the rates after
+    # fixing the general classes each showed, under the phrase convention (docs/language.md)
+    ("instructions_blind_4.json", 120, 35, 113),
+    ("instructions_blind_5.json", 120, 37, 118),
+])  # fmt: skip
+def test_later_blind_tables_keep_their_rates_and_stay_safe(table, rows, refusals, exact):
+    score = score_table(DATA / table, OfflineDecomposer())
+    print(f"\n{table}: {score.exact}/{score.total} exact; wrong: {score.wrong}")
+    assert (score.total, score.refusals_expected) == (rows, refusals)
+    assert (score.dropped_obstacles, score.obstacle_as_target, score.negated_planned) == ([], [], [])
+    assert score.exact >= exact, score.wrong
+
+
 @pytest.fixture(scope="module")
 def decomposer():
     return OfflineDecomposer()

@@ -11,6 +11,9 @@ two-obstacle and 10 moving-obstacle episodes of put_item_in_drawer (recommended)
 
     OMP_NUM_THREADS=1 python bench/bench_refactor_equivalence.py                         # ~4 CPU-hours
     OMP_NUM_THREADS=1 python bench/bench_refactor_equivalence.py --tasks bowl_pour --presets tuned --episodes 2
+
+The reference side never changes, so a later commit can be checked against a saved run's reference outcomes
+(`--reference-from results/refactor_equivalence.json`), which halves the cost.
 """
 
 from __future__ import annotations
@@ -76,6 +79,15 @@ def reference_source(commit: str, work: Path) -> Path:
     return folder
 
 
+def saved_reference(path: Path) -> dict[str, list[dict]]:
+    """The reference side's episodes per cell name, from an earlier run's results file."""
+    record = json.loads(path.read_text())
+    if record["config"]["compared"] != [*COMPARED, "min_clearance"]:
+        sys.exit(f"{path} compared {record['config']['compared']}; run without --reference-from")
+    return {cell["name"]: [{"seed": row["seed"], **row["reference"]} for row in cell["rows"]]
+            for cell in record["cells"]}
+
+
 def run_reference(cell: dict, seed: int, out: Path, source: Path) -> dict:
     """The reference commit's evaluation of a cell, through its own command line (cached in `out`)."""
     if out.exists():
@@ -119,14 +131,30 @@ def main() -> None:
     parser.add_argument("--tag", default="")
     parser.add_argument("--workers", type=int, default=1, help="this checkout's episode processes (each episode "
                                                                "is seeded alone: the outcomes do not depend on it)")
+    parser.add_argument("--reference-from", type=Path, default=None,
+                        help="take the reference side's outcomes from this earlier results file (same seed and "
+                             "reference commit) instead of running it")
     args = parser.parse_args()
 
-    source = reference_source(args.reference_commit, args.work)
+    saved = saved_reference(args.reference_from) if args.reference_from else None
+    if saved is not None:
+        made = json.loads(args.reference_from.read_text())["config"]
+        if (made["seed"], made["reference_commit"]) != (args.seed, args.reference_commit):
+            sys.exit(f"{args.reference_from} was made with seed {made['seed']} against {made['reference_commit']}; "
+                     "give the same --seed and --reference-commit, or run without --reference-from")
+    source = None if saved is not None else reference_source(args.reference_commit, args.work)
     report = []
     for cell in cells(args.tasks.split(","), args.presets.split(","), args.episodes, args.extra_episodes):
-        reference = run_reference(cell, args.seed, args.work / "reference" / f"{cell['name']}.json", source)
+        if saved is not None:
+            if cell["name"] not in saved or len(saved[cell["name"]]) != cell["episodes"]:
+                sys.exit(f"{args.reference_from} has no {cell['episodes']}-episode cell {cell['name']}; "
+                         "run without --reference-from")
+            reference_episodes = saved[cell["name"]]
+        else:
+            reference_path = args.work / "reference" / f"{cell['name']}.json"
+            reference_episodes = run_reference(cell, args.seed, reference_path, source)["episodes"]
         after = run_after(cell, args.seed, args.work / "after" / f"{cell['name']}.json", args.workers)
-        rows = compare(reference["episodes"], after["episodes"])
+        rows = compare(reference_episodes, after["episodes"])
         made = after.get("provenance") or {}
         report.append({**cell, "identical": all(r["same"] for r in rows), "episodes_compared": len(rows),
                        "after_commit": made.get("commit"), "after_dirty": made.get("dirty"),
@@ -134,6 +162,7 @@ def main() -> None:
         print(f"{cell['name']}: {sum(r['same'] for r in rows)}/{len(rows)} identical", flush=True)
     config = {"tasks": args.tasks, "presets": args.presets, "episodes": args.episodes, "workers": args.workers,
               "extra_episodes": args.extra_episodes, "seed": args.seed, "reference_commit": args.reference_commit,
+              "reference_from": relative(args.reference_from) if args.reference_from else None,
               "compared": [*COMPARED, "min_clearance"], "clearance_tolerance_m": CLEARANCE_TOLERANCE}
     verdict = all(c["identical"] for c in report)
     table = markdown_table(["cell", "episodes", "identical"],
@@ -143,7 +172,9 @@ def main() -> None:
             f"Every episode compared on {', '.join(config['compared'])} (clearance to {CLEARANCE_TOLERANCE:g} m): "
             f"{'all identical' if verdict else 'NOT all identical'}. This side's episodes ran at commit(s) "
             f"{', '.join(sorted({str(c['after_commit'])[:10] for c in report}))}; the reference side through "
-            f"{args.reference_commit}'s own command line.\n\n{table}\n")
+            f"{args.reference_commit}'s own command line"
+            f"{f' (its outcomes as saved in {relative(args.reference_from)})' if args.reference_from else ''}."
+            f"\n\n{table}\n")
     command = shlex.join(["python", "bench/bench_refactor_equivalence.py",
                           *(relative(a) if Path(a).is_absolute() else a for a in sys.argv[1:])])
     write_script_results(f"refactor_equivalence{args.tag}", command=command, config=config,

@@ -286,8 +286,10 @@ def refactor_equivalence(name: str, data: dict) -> list[str]:
     rows = [[c["name"], c["episodes_compared"], "yes" if c["identical"] else f"no: seeds {c['differing_seeds']}"]
             for c in data["cells"]]
     compared = ", ".join(data["config"]["compared"])
+    saved = data["config"].get("reference_from")
     return [f"The same seeds through the runtime before its redesign ({data['config']['reference_commit']}, its "
-            f"own command line) and through this one, compared on {compared}: "
+            f"own command line{f'; its outcomes as saved in `{saved}`' if saved else ''}) and through this one, "
+            f"compared on {compared}: "
             f"{'every episode identical' if data['identical'] else 'NOT every episode identical'}.", "",
             markdown_table(["cell", "episodes", "identical"], rows), ""]
 

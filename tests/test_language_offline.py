@@ -56,6 +56,7 @@ def test_blind_table_3_plans_exactly_and_safely():
     # fixing the general classes each showed, under the phrase convention (docs/language.md)
     ("instructions_blind_4.json", 120, 35, 113),
     ("instructions_blind_5.json", 120, 37, 118),
+    ("instructions_blind_6.json", 120, 36, 116),  # first run 103/120 (score_blind.py), 108/120 (convention)
 ])  # fmt: skip
 def test_later_blind_tables_keep_their_rates_and_stay_safe(table, rows, refusals, exact):
     score = score_table(DATA / table, OfflineDecomposer())

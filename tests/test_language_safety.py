@@ -92,6 +92,11 @@ DECLARED = [
     ("Set the phone onto the charging station", ("phone_on_base", ["phone", "base"], [])),
     ("Put the left block in the drawer, not the small one",
      ("put_item_in_drawer", ["left block", "drawer"], ["small block"])),
+    # found by the blind table 6
+    ("Close the microwave; the cup may be moved, the glass may not", ("close_microwave", ["microwave"], ["glass"])),
+    ("The drawer's been pulled out halfway, open it fully", ("open_drawer", ["drawer"], [])),
+    ("The phone has to go on the base, watch the lamp", ("phone_on_base", ["phone", "base"], ["lamp"])),
+    ("Keep your hands off the kettle and close the microwave", ("close_microwave", ["microwave"], ["kettle"])),
 ]  # fmt: skip
 
 
@@ -115,6 +120,7 @@ PERMITTED = [
     "Put the block in the drawer, it's fine to bump the mug",
     "Put the block in the drawer; it's okay if you nudge the mug",
     "Put the block in the drawer, you can knock the mug",
+    "Put the block in the drawer, never mind the mug",
 ]
 
 
@@ -169,6 +175,12 @@ REFUSALS = [
     (NegatedCommandError, "I wish you didn't open the drawer", "'didn't open the drawer' asks the robot"),
     (NegatedCommandError, "You won't need to sweep the crumbs", "'won't need to sweep the crumbs' asks the robot"),
     (NegatedCommandError, "We'd rather not pour the bowl into the pan", "'not pour the bowl into the pan'"),
+    # found by the blind table 6: a question without its "?", an outcome the skill does not produce, a target
+    # the user keeps the gripper off
+    (InstructionNotUnderstoodError, "why did you open the drawer", "it is a question, not a task"),
+    (InstructionNotUnderstoodError, "Pull the drawer closed", "'drawer closed' asks for the drawer to end up closed"),
+    (InstructionNotUnderstoodError, "Set the block down on the counter", "'on the counter' is not where"),
+    (ContradictionError, "Pour the bowl into the pan but keep your hand off the bowl", "'keep off' says to keep"),
     (InstructionNotUnderstoodError, "Is the drawer open?", "it is a question, not a task"),
     (InstructionNotUnderstoodError, "Where did you put the phone?", "it is a question, not a task"),
     (UnknownVerbError, "Smash the bowl into the pan", "'smash' is not a verb any skill is asked for with"),

@@ -239,7 +239,8 @@ def _bare_plural_noun(words: Sequence[str], i: int) -> bool:
 
 def _possessive(words: Sequence[str], i: int) -> bool:
     """ "'s" after a noun ("the bowl's contents"); after "that", "it", "there" it is "is"."""
-    return words[i] == "'s" and i > 0 and words[i - 1] not in _PRONOUNS_BEFORE_IS
+    has = words[i + 1 : i + 2] in (["been"], ["got"], ["gotten"])  # "the microwave's been left open"
+    return words[i] == "'s" and i > 0 and words[i - 1] not in _PRONOUNS_BEFORE_IS and not has
 
 
 def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
@@ -285,7 +286,8 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     ):
         chunk.pop(0)  # "the open drawer", "the fallen bottle", "the ceramic mug": the object is the noun
     # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)
-    if not chunk or (len(chunk) == 1 and (chunk[0] in NOT_OBJECTS or chunk[0] in _ADJECTIVES)):
+    material = len(chunk) == 1 and chunk[0] in _ADJECTIVES and not _known_at(chunk, 0, known)  # not "the glass"
+    if not chunk or (len(chunk) == 1 and chunk[0] in NOT_OBJECTS) or material:
         return None  # "the left side", "they're both hot": no object
     if _contents_after_of(words, j):
         return None

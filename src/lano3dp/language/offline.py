@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import functools
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -95,6 +95,10 @@ _COLLISION_VERBS = frozenset(
     """touch hit bump knock disturb topple collide crash brush graze nudge move tip spill strike smash break
     jostle upset rattle scrape scratch damage push shove bang clip snag contact run go come""".split()
 )
+# Places to set an object down that no skill puts things on.
+_SURFACES = frozenset("table counter countertop worktop floor ground side desk shelf surface".split())
+_PLACEMENT_MODALS = frozenset("needs need has have to should must can will ought".split())
+_OWN_BODY = frozenset("your the its my gripper grippers hand hands arm arms fingers yourself robot".split())
 _PHRASE_ENDS = frozenset(", and or from to near next beside away inside".split())
 # Adjectives that place an object relative to others, never part of its name.
 _RELATIONAL_ADJECTIVES = frozenset("neighbouring neighboring adjacent nearby".split())
@@ -166,6 +170,7 @@ _CUES: tuple[tuple[str, ...], ...] = (
     ("dont", "<hit>"), ("not", "<hit>"), ("never", "<hit>"), ("but", "not"), ("and", "not"),
     ("not", "near"), ("not", "close", "to"), ("not", "<det>"), ("watch", "<det>"),
     ("skip", "<det>"),  # "skip the red block and put the blue one in ...": left alone, so avoided
+    ("keep", "off"), ("stay", "off"), ("keeping", "off"), ("staying", "off"),
 )  # fmt: skip
 _CONTRASTS = frozenset({("not", "<det>"), ("but", "not"), ("and", "not")})
 # Predicates said of the noun phrase before them ("the mug is in the way").
@@ -338,6 +343,7 @@ class OfflineDecomposer:
         self._check_fit(instruction, skill, parse)
         self._resolve_references(instruction, skill, parse)
         targets, target_nouns = self._fill_slots(skill, parse.nouns)
+        _check_outcome(instruction, skill, parse.tokens, target_nouns)
         typed = {k: noun.name for k, noun in target_nouns.items()}
         obstacles = self._drop_targets(instruction, skill, targets, parse, set(typed.values()))
         _check_obstacle_count(instruction, obstacles)
@@ -386,7 +392,7 @@ class OfflineDecomposer:
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         words, read_as = self._read_words(words, vocabulary)
-        words = _front_positions(_declared_placements(_polite_requests(words)))
+        words = _front_positions(_declared_placements(_polite_requests(_own_body(words))))
         mentions = object_mentions(words, [*self._vocabulary, *scene_kinds], self._single_verbs)
         words = self._resolve_one_anaphora(words, vocabulary)
         parse = Parse(tokens=list(words), warnings=[*normalized.warnings, *read_as], mentions=mentions)
@@ -1208,6 +1214,8 @@ def _is_care(cue: str) -> bool:
 
 
 _QUESTION_WORDS = frozenset("is are was were do does did where what why when who which how has have am".split())
+_WH_WORDS = frozenset("where what why when who which how".split())
+_AUXILIARIES = frozenset("did do does is are was were has have had can could will would should".split())
 
 
 def _refuse_question(instruction: str, parse: Parse) -> None:
@@ -1217,8 +1225,38 @@ def _refuse_question(instruction: str, parse: Parse) -> None:
     for position, _ in parse.verb_at[:1]:
         start = max((k + 1 for k in range(position) if tokens[k] in _SENTENCE_END), default=0)
         end = next((k for k in range(position, len(tokens)) if tokens[k] in _SENTENCE_END), len(tokens))
-        if end < len(tokens) and tokens[end] == "?" and tokens[start] in _QUESTION_WORDS:
+        asked = end < len(tokens) and tokens[end] == "?" and tokens[start] in _QUESTION_WORDS
+        # "where did you put the broom", typed without its "?": a wh-word and an auxiliary ask all the same
+        asked = asked or tokens[start] in _WH_WORDS and tokens[start + 1 : start + 2] in [[a] for a in _AUXILIARIES]
+        if asked:
             raise InstructionNotUnderstoodError(instruction, "it is a question, not a task; say what to do")
+
+
+def _check_outcome(instruction: str, skill: SkillSpec, tokens: Sequence[str], filled: Mapping[int, _Noun]) -> None:
+    """Refuse a request for an outcome the skill does not produce: "slide the drawer shut" is no open_drawer, and
+    "lay the bottle on its side" or "put the phone on the table" is no placement in the drawer or on the base (the
+    skill's destination, not named, would be taken instead)."""
+    for noun in filled.values():
+        result = tokens[noun.end] if noun.end < len(tokens) else ""
+        opposite = {"shut": "open", "closed": "open", "open": "close"}.get(result)
+        if opposite and skill.name.startswith(opposite):
+            raise InstructionNotUnderstoodError(
+                instruction, f"'{noun.name} {result}' asks for the {noun.name} to end up {result}, which "
+                             f"{skill.name} does not do; no skill fits")
+    destinations = [k for k, slot in enumerate(skill.slots) if not slot.carried and k not in filled]
+    if not destinations or not any(slot.carried for slot in skill.slots):
+        return
+    for i, word in enumerate(tokens):
+        if word not in _DESTINATIONS:
+            continue
+        k = i + 1
+        while k < len(tokens) and (tokens[k] in DETERMINERS or tokens[k] in ("'s", "own")):
+            k += 1
+        if k < len(tokens) and tokens[k] in _SURFACES:
+            said = " ".join(tokens[i : k + 1])
+            raise InstructionNotUnderstoodError(
+                instruction, f"'{said}' is not where {skill.name} puts things (the "
+                             f"{', '.join(skill.slots[d].word for d in destinations)}); no skill fits")
 
 
 def _check_obstacle_count(instruction: str, obstacles: Sequence[ObjectRef]) -> None:
@@ -1301,17 +1339,43 @@ def _polite_requests(words: list[str]) -> list[str]:
 
 
 def _declared_placements(words: list[str]) -> list[str]:
-    """ "the spatula goes in the drawer" -> "put the spatula in the drawer": a placement said as a fact about the
-    object (a determiner starting its clause) asks for it to be put there."""
+    """ "the spatula goes in the drawer", "the block needs to go in the drawer" -> "put the spatula in the drawer":
+    a placement said as a fact about the object (a determiner starting its clause) asks for it to be put there."""
     out = list(words)
     for i in range(len(out) - 1, 0, -1):
-        if out[i] not in ("goes", "belongs") or out[i + 1 : i + 2] not in (["in"], ["into"], ["on"], ["onto"]):
+        if out[i] not in ("go", "goes", "belongs") or out[i + 1 : i + 2] not in (["in"], ["into"], ["on"], ["onto"]):
             continue
-        start = i
+        subject_end = i
+        while subject_end > 0 and out[subject_end - 1] in _PLACEMENT_MODALS:
+            subject_end -= 1  # "needs to go", "has to go", "should go"
+        if out[i] == "go" and subject_end == i:
+            continue  # "go" alone is an order to the robot ("go around the mug"), not a placement
+        start = subject_end
         while start > 0 and out[start - 1] not in _SENTENCE_END | {",", "so", "and", "then", "ok", "okay"}:
             start -= 1
-        if out[start] in DETERMINERS and start < i - 1:
-            out[start:i + 1] = ["put", *out[start:i]]
+        if out[start] in DETERMINERS and start < subject_end - 1:
+            out[start : i + 1] = ["put", *out[start:subject_end]]
+    return out
+
+
+def _own_body(words: list[str]) -> list[str]:
+    """ "keep your gripper off the bottle" -> "keep off the bottle"; "never mind the spoon" -> "ignore the spoon"
+    (a permission, not a negated command or the cue "mind")."""
+    out, i = [], 0
+    while i < len(words):
+        if words[i] == "never" and words[i + 1 : i + 2] == ["mind"]:
+            out.append("ignore")
+            i += 2
+            continue
+        out.append(words[i])
+        if words[i] in ("keep", "keeping", "stay", "hold"):
+            k = i + 1
+            while k < len(words) and words[k] in _OWN_BODY:
+                k += 1
+            if k > i + 1 and words[k : k + 1] in (["off"], ["away"], ["clear"], ["back"]):
+                i = k
+                continue
+        i += 1
     return out
 
 

@@ -228,10 +228,10 @@ def is_adjective(word: str) -> bool:
 
 
 def _bare_plural_noun(words: Sequence[str], i: int) -> bool:
-    """ "there are glasses everywhere", "cups all over": a plural needs no determiner to name objects. Not a verb
-    with its subject before it or its object after it ("it blocks the way", "the broom brushes dirt")."""
+    """ "there are glasses everywhere": a plural needs no determiner to name objects. Not a verb with its subject
+    before it or its object after it ("it matches the cup", "the broom brushes the dirt")."""
     word = words[i]
-    if singular(word) == word or singular(word) not in _AMBIGUOUS_BARE | {word.removesuffix("es")}:
+    if singular(word) == word:
         return False
     previous, following = (words[i - 1] if i else ","), (words[i + 1] if i + 1 < len(words) else ".")
     return previous not in _PRONOUNS_BEFORE_IS and following not in _DETERMINERS and following not in _MODIFIERS

@@ -1244,8 +1244,9 @@ def _check_outcome(instruction: str, skill: SkillSpec, tokens: Sequence[str], fi
                 instruction, f"'{noun.name} {result}' asks for the {noun.name} to end up {result}, which "
                              f"{skill.name} does not do; no skill fits")
     destinations = [k for k, slot in enumerate(skill.slots) if not slot.carried and k not in filled]
-    if not destinations or not any(slot.carried for slot in skill.slots):
-        return
+    carried_named = any(slot.carried and k in filled for k, slot in enumerate(skill.slots))
+    if not destinations or not carried_named:
+        return  # "sweep the crumbs on the table": the place is where the dirt is, not where a named object goes
     for i, word in enumerate(tokens):
         if word not in _DESTINATIONS:
             continue

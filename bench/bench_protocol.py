@@ -312,8 +312,9 @@ def write_report(args: argparse.Namespace) -> Path:
     body = report(args)
     body["setup"] = {"minutes": args.minutes, "demos": args.demos, "episodes": args.episodes,
                      "variation_episodes": args.variation_episodes, "curve_episodes": args.curve_episodes}
-    plot_report(body, args)
-    return write_results("protocol", args, body, markdown=markdown)
+    written = write_results("protocol", args, body, markdown=markdown)
+    plot_report(body, args)  # after: provenance reads the tree as the run found it, not with its own plot changed
+    return written
 
 
 def plot_report(body: dict[str, Any], args: argparse.Namespace) -> None:

@@ -2,9 +2,9 @@
 
 Each claim is one comparison of pooled success (or touch) counts with 95% Wilson intervals: it "holds" when the
 intervals separate in the claimed direction, "does not hold" when they separate the other way, and is "not
-separated" otherwise. Only cells measured on the same tasks for every method enter a comparison, so a method is never
-credited with a task the others were not run on. docs/gen_benchmarks.py writes the paragraph between the README's
-claims markers.
+separated" otherwise. Only cells measured on the same task and training seed for every method enter a comparison, so
+a method is never credited with a task or seed the others were not run on. docs/gen_benchmarks.py writes the
+paragraph between the README's claims markers.
 """
 
 from __future__ import annotations
@@ -57,9 +57,14 @@ def verdict(ours: Count, others: Iterable[Count], *, higher_is_better: bool = Tr
 
 
 def _cells(protocol: Mapping[str, Any]) -> dict[str, dict[str, list[dict]]]:
-    """{task: {method: [seed entries]}} of the committed cells."""
-    return {task: {method: list(entry["seeds"].values()) for method, entry in methods.items()}
-            for task, methods in protocol.get("tasks", {}).items()}
+    """{task: {method: [seed entries]}} of the committed cells, keeping only the training seeds every method has
+    for that task (a task without all three methods keeps none)."""
+    out = {}
+    for task, methods in protocol.get("tasks", {}).items():
+        seeds = [set(methods[m]["seeds"]) if m in methods else set() for m in (OURS, *BASELINES)]
+        shared = sorted(set.intersection(*seeds))
+        out[task] = {method: [entry["seeds"][seed] for seed in shared] for method, entry in methods.items()}
+    return out
 
 
 def success_claim(protocol: Mapping[str, Any]) -> str:
@@ -71,7 +76,8 @@ def success_claim(protocol: Mapping[str, Any]) -> str:
             for seed in cells[task][method]:
                 count.add(seed["final"])
     numbers = ", ".join(f"{NAMES[m]} {counts[m]}" for m in counts)
-    where = f"on the {len(shared)} task(s) with all three methods measured ({', '.join(shared)}): {numbers}" \
+    where = f"on the {len(shared)} task(s) with all three methods measured, on the same training seeds " \
+            f"({', '.join(shared)}): {numbers}" \
         if shared else "no task has all three methods measured yet"
     return f"**Higher success than DP3 and Diffusion Policy** (clean scenes, final checkpoints): " \
            f"{verdict(counts[OURS], [counts[m] for m in BASELINES])}; {where}."

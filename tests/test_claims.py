@@ -1,5 +1,5 @@
 """The README's claims paragraph says "holds" only when the 95% intervals separate, and compares methods only on the
-tasks every one of them was measured on."""
+tasks and training seeds every one of them was measured on."""
 
 from __future__ import annotations
 
@@ -42,6 +42,14 @@ def test_a_task_without_every_method_is_left_out_of_the_comparison(claims):
         "water_plants": {"objects": {"seeds": {"0": cell(0)}}}}}  # no baseline yet: not counted for anyone
     text = claims.success_claim(protocol)
     assert text.count("holds") == 1 and "48/50" in text and "(open_drawer)" in text and "water_plants" not in text
+
+
+def test_a_seed_without_every_method_is_left_out_of_the_comparison(claims):
+    protocol = {"tasks": {"open_drawer": {
+        "objects": {"seeds": {"0": cell(48), "1": cell(50)}},  # seed 1 ran for Lan-o3dp only: not counted
+        "scene": {"seeds": {"0": cell(10)}}, "image": {"seeds": {"0": cell(12)}}}}}
+    text = claims.success_claim(protocol)
+    assert "Lan-o3dp 48/50" in text and "98/100" not in text
 
 
 def test_robustness_compares_lan_o3dp_with_perception_that_can_fail_not_the_ground_truth(claims):

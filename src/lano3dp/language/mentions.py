@@ -345,17 +345,22 @@ def is_target(
     object ("water the plant, the cactus is prickly")."""
     for k, target in enumerate(plan.targets):
         synonyms = _exact_synonyms(skill, k, registry)
-        name = singular(mention.name)
         same = mention.name == target.name or (
-            target.name in synonyms and (mention.name in synonyms or name in synonyms)
+            target.name in synonyms and (mention.name in synonyms or singular(mention.name) in synonyms)
         )
-        if same and typed and k in typed and name not in (typed[k], target.name) and mention.name != typed[k]:
+        if same and names_another(mention.name, target.name, (typed or {}).get(k)):
             continue
         if same and _compatible(mention, target) and mention.position in (None, target.position, "other"):
             if mention.position == "other" and target.position != "other":
                 continue
             return True
     return False
+
+
+def names_another(name: str, slot_word: str, typed_word: str | None) -> bool:
+    """Whether a word of a target's slot names another object of that kind: a specific word other than the one the
+    target was named with ("water the plant, the cactus is prickly"); the slot's own word may mean either."""
+    return typed_word is not None and not {name, singular(name)} & {typed_word, slot_word}
 
 
 def is_obstacle(mention: Mention, plan: TaskPlan) -> bool:

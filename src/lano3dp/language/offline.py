@@ -50,7 +50,7 @@ from lano3dp.language.exceptions import (
     UnknownVerbError,
 )
 from lano3dp.language.grounding import ground_plan
-from lano3dp.language.mentions import NOT_OBJECTS, Mention, enforce_mentions, object_mentions
+from lano3dp.language.mentions import NOT_OBJECTS, Mention, enforce_mentions, names_another, object_mentions
 from lano3dp.language.normalize import normalize_instruction
 from lano3dp.language.plan import MAX_NAME_CHARS, MAX_OBSTACLES, ObjectRef, TaskPlan
 from lano3dp.language.registry import (
@@ -344,8 +344,9 @@ class OfflineDecomposer:
         self._resolve_references(instruction, skill, parse)
         targets, target_nouns = self._fill_slots(skill, parse.nouns)
         _check_outcome(instruction, skill, parse.tokens, target_nouns)
-        typed = {k: noun.name for k, noun in target_nouns.items()}
-        obstacles = self._drop_targets(instruction, skill, targets, parse, set(typed.values()))
+        # the word each target was named with, where it is one of its slot's words (not "the stapler")
+        typed = {k: noun.name for k, noun in target_nouns.items() if _exact(skill.slots[k], noun.name)}
+        obstacles = self._drop_targets(instruction, skill, targets, parse, typed)
         _check_obstacle_count(instruction, obstacles)
         plan = TaskPlan(skill=skill.name, targets=targets, obstacles=obstacles, warnings=parse.warnings)
         # a mention among a target's own words is that target ("the remote control", "the rubber duck")
@@ -1173,20 +1174,20 @@ class OfflineDecomposer:
 
     @staticmethod
     def _drop_targets(
-        instruction: str, skill: SkillSpec, targets: list[ObjectRef], parse: Parse, typed: set[str]
+        instruction: str, skill: SkillSpec, targets: list[ObjectRef], parse: Parse, typed: Mapping[int, str]
     ) -> list[ObjectRef]:
         """Obstacles without those that are a target. Care said of a target ("pour the bowl into the pan, don't
         spill the bowl", "the bowl is hot") is kept as a warning; distance from it ("without touching the
-        bottle", "avoid the bowl") is a contradiction, refused. A slot's synonym other than the word the target was
-        typed with and other than the slot word names another object ("water the plant, the fern is fragile")."""
+        bottle", "avoid the bowl") is a contradiction, refused. `typed` (slot index -> the word the target was
+        named with): another word of the slot names another object (`mentions.names_another`)."""
         kept = []
         for obstacle in parse.obstacles:
             same = [
                 t
-                for slot, t in zip(skill.slots, targets, strict=True)
+                for k, (slot, t) in enumerate(zip(skill.slots, targets, strict=True))
                 if (
                     _exact(slot, obstacle.name) and slot.matches(t.name)
-                    and (obstacle.name in typed or obstacle.name == slot.word or not typed & set(slot.synonyms))
+                    and not names_another(obstacle.name, slot.word, typed.get(k))
                     or obstacle.name == t.name
                 )
                 and obstacle.position != "other"

@@ -79,11 +79,16 @@ def reference_source(commit: str, work: Path) -> Path:
     return folder
 
 
-def saved_reference(path: Path) -> dict[str, list[dict]]:
-    """The reference side's episodes per cell name, from an earlier run's results file."""
+def saved_reference(path: Path, seed: int, reference_commit: str) -> dict[str, list[dict]]:
+    """The reference side's episodes per cell name, from an earlier run's results file of the same seed and
+    reference commit."""
     record = json.loads(path.read_text())
-    if record["config"]["compared"] != [*COMPARED, "min_clearance"]:
-        sys.exit(f"{path} compared {record['config']['compared']}; run without --reference-from")
+    made = record["config"]
+    if made["compared"] != [*COMPARED, "min_clearance"]:
+        sys.exit(f"{path} compared {made['compared']}; run without --reference-from")
+    if (made["seed"], made["reference_commit"]) != (seed, reference_commit):
+        sys.exit(f"{path} was made with seed {made['seed']} against {made['reference_commit']}; "
+                 "give the same --seed and --reference-commit, or run without --reference-from")
     return {cell["name"]: [{"seed": row["seed"], **row["reference"]} for row in cell["rows"]]
             for cell in record["cells"]}
 
@@ -136,12 +141,8 @@ def main() -> None:
                              "reference commit) instead of running it")
     args = parser.parse_args()
 
-    saved = saved_reference(args.reference_from) if args.reference_from else None
-    if saved is not None:
-        made = json.loads(args.reference_from.read_text())["config"]
-        if (made["seed"], made["reference_commit"]) != (args.seed, args.reference_commit):
-            sys.exit(f"{args.reference_from} was made with seed {made['seed']} against {made['reference_commit']}; "
-                     "give the same --seed and --reference-commit, or run without --reference-from")
+    saved = (saved_reference(args.reference_from, args.seed, args.reference_commit) if args.reference_from
+             else None)
     source = None if saved is not None else reference_source(args.reference_commit, args.work)
     report = []
     for cell in cells(args.tasks.split(","), args.presets.split(","), args.episodes, args.extra_episodes):

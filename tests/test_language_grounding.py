@@ -43,6 +43,25 @@ def test_a_registered_synonym_of_the_same_slot_is_the_same_object_not_a_substitu
     assert decomposer.decompose("put the toy in the drawer", DRAWER_SCENE).target_phrases == ["block", "drawer"]
 
 
+def test_a_compound_names_a_kind_of_its_last_noun(decomposer):
+    # "phone charger" is the charger (the base slot's synonym), never the scene's phone
+    plan = decomposer.decompose("put the phone on the phone charger", {"phone": {}, "base": {}})
+    assert plan.target_phrases == ["phone", "base"]
+    plan = decomposer.decompose("pour the mixing bowl into the pan", {"bowl": {}, "pan": {}})
+    assert plan.target_phrases == ["mixing bowl", "pan"]
+
+
+def test_an_obstacle_of_the_targets_kind_is_never_the_target_itself(decomposer):
+    scene = {"bowl": {"role": "target"}, "pan": {"role": "target"}, "obstacle_0": {"kind": "cylinder",
+                                                                                 "role": "obstacle"}}
+    plan = decomposer.decompose("pour the mixing bowl into the pan, careful of the fruit bowl")
+    with pytest.raises(UnknownObjectError, match="obstacle 'fruit bowl' is not in the scene"):
+        ground_plan(plan, scene, decomposer.registry)  # the scene's one bowl is the target
+    grounded = ground_plan(plan, scene, decomposer.registry, obstacle_stand_ins=True)
+    assert (grounded.plan.target_phrases, grounded.obstacles) == (["mixing bowl", "pan"], ["obstacle_0"])
+    assert grounded.notes[0] == "obstacle 'fruit bowl' is not the target of the same kind; the scene holds no other"
+
+
 def test_the_user_may_map_a_phrase_explicitly(decomposer):
     plan = decomposer.decompose("put the teapot in the drawer")
     grounded = ground_plan(plan, DRAWER_SCENE, decomposer.registry, mapping={"teapot": "block"})

@@ -97,6 +97,19 @@ DECLARED = [
     ("The drawer's been pulled out halfway, open it fully", ("open_drawer", ["drawer"], [])),
     ("The phone has to go on the base, watch the lamp", ("phone_on_base", ["phone", "base"], ["lamp"])),
     ("Keep your hands off the kettle and close the microwave", ("close_microwave", ["microwave"], ["kettle"])),
+    # a target named by a compound is reported as typed (tables 4-6: "mixing bowl", "kitchen drawer"); a noun that
+    # can also be an adjective is a noun there, an adjective or participle describes and is dropped
+    ("Pour the soup bowl into the pan", ("bowl_pour", ["soup bowl", "pan"], [])),
+    ("Put the stapler in the office drawer", ("put_item_in_drawer", ["stapler", "office drawer"], [])),
+    ("Put the key in the kitchen drawer", ("put_item_in_drawer", ["key", "kitchen drawer"], [])),  # not "wooden"
+    ("Stand the juice bottle up, avoid the lamp", ("bottle_upright", ["juice bottle"], ["lamp"])),
+    ("Water the tomato plant", ("water_plants", ["watering can", "tomato plant"], [])),
+    ("Put the red toy block in the drawer", ("put_item_in_drawer", ["red toy block", "drawer"], [])),
+    ("Put the phone on the phone charger", ("phone_on_base", ["phone", "phone charger"], [])),
+    ("Open the wooden drawer", ("open_drawer", ["drawer"], [])),
+    ("Stand the chipped bottle up", ("bottle_upright", ["bottle"], [])),
+    ("Pour the bowl into the frying pan", ("bowl_pour", ["bowl", "pan"], [])),  # a registered synonym: slot word
+    ("Pour the bowl into the pan, avoid the fruit bowl", ("bowl_pour", ["bowl", "pan"], ["fruit bowl"])),
 ]  # fmt: skip
 
 

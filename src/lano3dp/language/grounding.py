@@ -21,7 +21,7 @@ from typing import NamedTuple
 from lano3dp.language.exceptions import TargetNotInSceneError, UnknownObjectError
 from lano3dp.language.plan import ObjectRef, TaskPlan
 from lano3dp.language.registry import SceneObjects, SkillRegistry, Slot, describe_scene, scene_vocabulary
-from lano3dp.vocabulary import SceneObject, resolve_phrase, singular
+from lano3dp.vocabulary import SceneObject, resolve_phrase, singular, tokens
 
 
 class GroundedPlan(NamedTuple):
@@ -85,13 +85,14 @@ def ground_plan(
                 return ObjectRef(name=target)
         return None
 
-    targets = []
+    targets, target_objects = [], set()
     for k, target in enumerate(plan.targets):
         slot = skill.slots[k] if skill is not None and k < len(skill.slots) else None
         found = mapped(target) or _by_words_or_synonym(target, slot, objects, kinds)
         if found is None:
             raise TargetNotInSceneError(target.phrase, described)
         targets.append(found)
+        target_objects.update(resolve_phrase(found.phrase, objects))
 
     obstacles, segment = [], []
     roles = _scene_roles(scene_objects)
@@ -99,6 +100,11 @@ def ground_plan(
     missing = []
     for obstacle in plan.obstacles:
         found = mapped(obstacle) or _by_words_or_synonym(obstacle, None, objects, kinds)
+        if found is not None and set(resolve_phrase(found.phrase, objects)) <= target_objects:
+            # "pour the mixing bowl ..., careful of the fruit bowl" in a scene with one bowl: the object to avoid is
+            # not the one acted on, so it is not in this scene
+            notes.append(f"obstacle '{obstacle.phrase}' is not the target of the same kind; the scene holds no other")
+            found = None
         if found is None and matcher is not None and kinds:
             index, similarity = matcher.best_match(obstacle.name, kinds)
             candidate = obstacle.model_copy(update={"name": kinds[index]})
@@ -124,14 +130,29 @@ def ground_plan(
     return GroundedPlan(grounded, segment, notes)
 
 
+def _by_head(ref: ObjectRef, objects: list[SceneObject]) -> list[str]:
+    """The objects `ref` names, read by the last noun of its name: a compound names a kind of its last noun ("the
+    phone charger" is a charger, not the phone; "the mixing bowl" is a bowl)."""
+    head = singular(ref.name.split()[-1]) if ref.name.split() else ""
+    by_name = {o.name: o for o in objects}
+    return [name for name in resolve_phrase(ref.phrase, objects) if by_name[name].kind[-1:] == (head,)
+            or " ".join(ref.phrase.split()) == " ".join(tokens(name))]
+
+
 def _by_words_or_synonym(
     ref: ObjectRef, slot: Slot | None, objects: list[SceneObject], kinds: list[str]
 ) -> ObjectRef | None:
-    """`ref` if the scene has it by its words; else `ref` renamed to a scene kind that is a registered synonym
-    of the same slot as `ref`'s own noun; else None."""
-    if resolve_phrase(ref.phrase, objects):
-        return ref
-    if slot is None or not _exact(slot, ref.name):
+    """`ref` if the scene has it by its words (renamed to the object's kind where another word of a compound is a
+    scene kind too: "phone charger" -> "charger"); else `ref` renamed to a scene kind that is a registered synonym of
+    the same slot as `ref`'s own noun or its compound's last noun; else None."""
+    found = _by_head(ref, objects)
+    if found:
+        if found == resolve_phrase(ref.phrase, objects):
+            return ref
+        kind = " ".join(next(o.kind for o in objects if o.name == found[0]))
+        return ref.model_copy(update={"name": kind})
+    head = singular(ref.name.split()[-1]) if ref.name.split() else ""
+    if slot is None or not (_exact(slot, ref.name) or _exact(slot, head)):
         return None  # a noun the slot merely accepts ("teapot" in the item slot) is never swapped for another
     for kind in kinds:
         if _exact(slot, kind):

@@ -216,15 +216,33 @@ _ADJECTIVES = frozenset(
 )
 
 
+@functools.cache
+def _parts_of_speech(word: str) -> frozenset[str]:
+    """The word classes an English lexicon gives `word` ("NOUN", "ADJ", "VERB", ...; empty if it lacks it).
+    lemminflect's lexicon rather than a hand list: which words are nouns is open-ended ("kitchen", "cereal"),
+    and suffixes mislead ("kitchen" ends like "wooden")."""
+    import lemminflect  # loads its lexicon on first use (~0.3 CPU-s), not when lano3dp is imported
+
+    return frozenset(lemminflect.getAllLemmas(word))
+
+
 def is_adjective(word: str) -> bool:
     """Whether a word before a noun describes it rather than naming another object ("open", "ceramic",
-    "battered"); "water" in "water bottle" or an unknown noun in a compound names a kind, and is no adjective."""
+    "battered"); "water" in "water bottle", "kitchen" in "kitchen drawer" or an unknown noun in a compound names
+    a kind, and is no adjective."""
     if word in _ADJECTIVES:
         return True
     if word in _COMPOUND_MODIFIERS or word in OBJECT_NOUNS:
         return False
-    # not "-ing": "cutting board", "frying pan", "baking tray" name kinds
-    return len(word) > 4 and word.endswith(("ed", "en", "ic", "al", "ous", "ful", "less", "ive", "ish", "ble"))
+    classes = _parts_of_speech(word)
+    if "NOUN" in classes:
+        return False  # a noun before a noun names a kind of it, also where it can be an adjective ("cereal")
+    if "ADJ" in classes:
+        return True
+    if classes == {"VERB"}:
+        return word.endswith(("ed", "en"))  # "battered", "chipped"; not "-ing": "frying pan", "mixing bowl"
+    # a word the lexicon lacks: by its suffix
+    return len(word) > 4 and word.endswith(("ed", "ic", "ous", "ful", "less", "ive", "ish", "ble"))
 
 
 def _bare_plural_noun(words: Sequence[str], i: int) -> bool:

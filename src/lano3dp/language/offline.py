@@ -50,7 +50,14 @@ from lano3dp.language.exceptions import (
     UnknownVerbError,
 )
 from lano3dp.language.grounding import ground_plan
-from lano3dp.language.mentions import NOT_OBJECTS, Mention, enforce_mentions, names_another, object_mentions
+from lano3dp.language.mentions import (
+    NOT_OBJECTS,
+    Mention,
+    enforce_mentions,
+    is_adjective,
+    names_another,
+    object_mentions,
+)
 from lano3dp.language.normalize import normalize_instruction
 from lano3dp.language.plan import MAX_NAME_CHARS, MAX_OBSTACLES, ObjectRef, TaskPlan
 from lano3dp.language.registry import (
@@ -256,6 +263,7 @@ class _Noun:
     landmark: bool = False  # after "next to", "under", ...: where something is, not what to act on
     destination: bool = False  # after "into" / "onto": where the carried object goes
     source: bool = False  # after "from", "out of", "off": where something is taken from
+    compound: str | None = None  # nouns typed before a known one that name its kind: "mixing" in "mixing bowl"
 
     def ref(self, name: str | None = None) -> ObjectRef:
         return ObjectRef(name=name or self.name, color=self.color, size=self.size, position=self.position)
@@ -880,7 +888,15 @@ class OfflineDecomposer:
                 i += 1  # "the toy car" is a car: read below as a noun of its own, never as the slot's "toy"
                 continue
             color, size, position = self._modifiers(task, i)
-            nouns.append(_Noun(match, color, size, known=True, index=i, end=end, position=position))
+            noun = _Noun(match, color, size, known=True, index=i, end=end, position=position,
+                         compound=self._compound_before(task, i, verb_positions, used))
+            if nouns and nouns[-1].known and nouns[-1].end == i and i - 1 not in verb_positions:
+                # two object words in a row are one object, named by the last ("the toy block", "the phone
+                # charger"); the first says its kind and carries what was said before it ("the red toy block")
+                first = nouns.pop()
+                noun.compound = " ".join(filter(None, (first.compound, " ".join(task[first.index : first.end]))))
+                noun.index, noun.color, noun.size, noun.position = first.index, first.color, first.size, first.position
+            nouns.append(noun)
             used.update(range(i, end))
             i = end
         # Unknown head nouns after a determiner ("the stapler"), or right after the verb ("put teapots in the
@@ -908,6 +924,23 @@ class OfflineDecomposer:
                     )
                     used.update(chunk)
         return sorted(nouns, key=lambda n: n.index)
+
+    def _compound_before(self, task: list[str], i: int, verb_positions: set[int], used: set[int]) -> str | None:
+        """The nouns typed right before the known object word at `i` that make a compound with it ("the mixing
+        bowl", "the kitchen drawer"): up to two words no rule reads (or a noun such as "water" or "coffee"), not
+        adjectives ("the empty bowl"), between a determiner, a colour/size/position or the verb and the object."""
+        start = i
+        while start > 0 and i - start < 2:
+            word = task[start - 1]
+            if start - 1 in used or start - 1 in verb_positions or not word.isalpha() or word.endswith("ly"):
+                break
+            if is_adjective(word) or (word in self._known_words and word not in _COMPOUND_MODIFIERS):
+                break
+            start -= 1
+        opens_phrase = start == 0 or task[start - 1] in DETERMINERS or task[start - 1] in _MODIFIERS or (
+            start - 1 in verb_positions
+        )
+        return " ".join(task[start:i]) if start < i and opens_phrase else None
 
     def _modifies_next_noun(self, task: list[str], end: int, verb_positions: set[int]) -> bool:
         """Whether the word at `end`, right after a known object word, is the head of their compound: a word the
@@ -1168,6 +1201,9 @@ class OfflineDecomposer:
                 targets.append(ObjectRef(name=slot.word))
                 continue
             noun, wildcard = assigned[k]
+            if noun.compound:  # a kind of the slot's object, named as typed ("mixing bowl"); grounded by its head
+                targets.append(noun.ref(f"{noun.compound} {noun.name}"))
+                continue
             keep_own_name = wildcard or (slot.accepts_any and not _exact(slot, noun.name))
             targets.append(noun.ref(None if keep_own_name else slot.word))
         return targets, {k: noun for k, (noun, _) in assigned.items()}

@@ -110,6 +110,11 @@ DECLARED = [
     ("Stand the chipped bottle up", ("bottle_upright", ["bottle"], [])),
     ("Pour the bowl into the frying pan", ("bowl_pour", ["bowl", "pan"], [])),  # a registered synonym: slot word
     ("Pour the bowl into the pan, avoid the fruit bowl", ("bowl_pour", ["bowl", "pan"], ["fruit bowl"])),
+    ("Put the big mixing bowl into the pan", ("bowl_pour", ["large mixing bowl", "pan"], [])),
+    # a compound of another skill's object is one object wherever it stands: a landmark, a pronoun's referent
+    ("Open the drawer beside the salad bowl", ("open_drawer", ["drawer"], ["salad bowl"])),
+    ("There's a dog toy near the pan, stay clear of it. Pour the bowl into the pan",
+     ("bowl_pour", ["bowl", "pan"], ["dog toy"])),
 ]  # fmt: skip
 
 

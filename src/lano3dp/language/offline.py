@@ -266,7 +266,9 @@ class _Noun:
     compound: str | None = None  # nouns typed before a known one that name its kind: "mixing" in "mixing bowl"
 
     def ref(self, name: str | None = None) -> ObjectRef:
-        return ObjectRef(name=name or self.name, color=self.color, size=self.size, position=self.position)
+        """The object as said (its compound too: "cat toy"), or named `name`."""
+        said = f"{self.compound} {self.name}" if self.compound else self.name
+        return ObjectRef(name=name or said, color=self.color, size=self.size, position=self.position)
 
 
 @dataclass(frozen=True)
@@ -887,9 +889,10 @@ class OfflineDecomposer:
             if self._modifies_next_noun(task, end, verb_positions):
                 i += 1  # "the toy car" is a car: read below as a noun of its own, never as the slot's "toy"
                 continue
-            color, size, position = self._modifiers(task, i)
-            noun = _Noun(match, color, size, known=True, index=i, end=end, position=position,
-                         compound=self._compound_before(task, i, verb_positions, used))
+            compound = self._compound_before(task, i, verb_positions, used)
+            start = i - len(compound.split()) if compound else i  # its words begin with the compound's
+            color, size, position = self._modifiers(task, start)
+            noun = _Noun(match, color, size, known=True, index=start, end=end, position=position, compound=compound)
             if nouns and nouns[-1].known and nouns[-1].end == i and i - 1 not in verb_positions:
                 # two object words in a row are one object, named by the last ("the toy block", "the phone
                 # charger"); the first says its kind and carries what was said before it ("the red toy block")
@@ -927,14 +930,14 @@ class OfflineDecomposer:
 
     def _compound_before(self, task: list[str], i: int, verb_positions: set[int], used: set[int]) -> str | None:
         """The nouns typed right before the known object word at `i` that make a compound with it ("the mixing
-        bowl", "the kitchen drawer"): up to two words no rule reads (or a noun such as "water" or "coffee"), not
+        bowl", "the fruit bowl"): up to two words no rule reads, or nouns such as "water" or "fruit"; not
         adjectives ("the empty bowl"), between a determiner, a colour/size/position or the verb and the object."""
         start = i
         while start > 0 and i - start < 2:
             word = task[start - 1]
             if start - 1 in used or start - 1 in verb_positions or not word.isalpha() or word.endswith("ly"):
                 break
-            if is_adjective(word) or (word in self._known_words and word not in _COMPOUND_MODIFIERS):
+            if is_adjective(word) or (word in self._known_words and word not in _COMPOUND_MODIFIERS | OBJECT_NOUNS):
                 break
             start -= 1
         opens_phrase = start == 0 or task[start - 1] in DETERMINERS or task[start - 1] in _MODIFIERS or (
@@ -1202,7 +1205,7 @@ class OfflineDecomposer:
                 continue
             noun, wildcard = assigned[k]
             if noun.compound:  # a kind of the slot's object, named as typed ("mixing bowl"); grounded by its head
-                targets.append(noun.ref(f"{noun.compound} {noun.name}"))
+                targets.append(noun.ref())
                 continue
             keep_own_name = wildcard or (slot.accepts_any and not _exact(slot, noun.name))
             targets.append(noun.ref(None if keep_own_name else slot.word))

@@ -115,6 +115,10 @@ DECLARED = [
     ("Open the drawer beside the salad bowl", ("open_drawer", ["drawer"], ["salad bowl"])),
     ("There's a dog toy near the pan, stay clear of it. Pour the bowl into the pan",
      ("bowl_pour", ["bowl", "pan"], ["dog toy"])),
+    # another skill's object said to be there, in the command's own sentence, is avoided, not refused
+    ("There's a bowl by the drawer, so open the drawer gently", ("open_drawer", ["drawer"], ["bowl"])),
+    ("Close the microwave, theres a phone next to it", ("close_microwave", ["microwave"], ["phone"])),
+    ("A bottle is beside the pan, pour the bowl into the pan", ("bowl_pour", ["bowl", "pan"], ["bottle"])),
 ]  # fmt: skip
 
 

@@ -260,6 +260,7 @@ class _Noun:
     end: int = 0  # token index after its words (its words: index to end)
     position: str | None = None
     in_task: bool = True  # said in a sentence with a lexicon verb, not in "there are two bowls."
+    declared: bool = False  # the subject of "there's a bowl ..." or "the bowl is ...": said to be there, not acted on
     landmark: bool = False  # after "next to", "under", ...: where something is, not what to act on
     destination: bool = False  # after "into" / "onto": where the carried object goes
     source: bool = False  # after "from", "out of", "off": where something is taken from
@@ -429,6 +430,9 @@ class OfflineDecomposer:
             noun.landmark = k >= 0 and task[k] in _LOCATIVES | {"to"} and (task[k] != "to" or task[k - 1] in _LOCATIVES)
             noun.destination = k >= 0 and task[k] in ("into", "onto")
             noun.source = k >= 0 and (task[k] in ("from", "off") or (task[k] == "of" and task[k - 1 : k] == ["out"]))
+            existential = task[k] == "theres" if k >= 0 else False
+            existential = existential or (k >= 1 and task[k] in _COPULAS and task[k - 1] == "there")
+            noun.declared = existential or task[noun.end : noun.end + 1] in (["is"], ["are"], ["'s"], ["'re"], ["sits"])
             if k >= 0 and task[k] in ("and", "or") and previous_noun is not None and previous_noun.landmark:
                 noun.landmark = True  # "past the mug and the jar": both are landmarks
             previous_noun = noun
@@ -1056,7 +1060,9 @@ class OfflineDecomposer:
         assigned, free = self._assign(skill, parse.nouns)
         slots = f"{skill.name} ({', '.join(skill.slot_words)})"
         for noun in free:
-            if noun.known and noun.in_task and not noun.landmark and not self._same_object(skill, noun, assigned):
+            if noun.known and noun.in_task and not (noun.landmark or noun.declared) and not self._same_object(
+                skill, noun, assigned
+            ):  # an object said to be there is avoided (`mentions`), not refused: "there's a bowl by the drawer"
                 raise InstructionNotUnderstoodError(instruction, f"'{noun.name}' has no place in {slots}")
         specific = [v for v in parse.verbs if v.split()[0] not in _GENERIC_VERBS]
         if specific and not any(skill.name in self._verbs[v] for v in parse.verbs):

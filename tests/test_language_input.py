@@ -121,6 +121,9 @@ TYPOS = [
     ("water the plant, avoid the vsae", "water_plants(watering can, plant); avoid vase",
      "read 'vsae' as 'vase' (a typo?)"),
     ("close the mircowave", "close_microwave(microwave)", "read 'mircowave' as 'microwave' (a typo?)"),
+    # the head of a compound stands where a noun stands
+    ("put the water bottel in the drawer", "bottle_in_drawer(water bottle, drawer)",
+     "read 'bottel' as 'bottle' (a typo?)"),
 ]
 
 

@@ -2,8 +2,8 @@
 
 A word is corrected only when all of these hold, so that a real word is never turned into another:
 - it is not a word the rules or the object list know (`known`), nor a common English word listed here;
-- it stands where a verb or a noun stands (first word of a clause: a verb; after "the", "a", a colour: a
-  noun), and is corrected only to a word of that kind;
+- it stands where a verb or a noun stands (first word of a clause: a verb; after "the", "a", a colour, or
+  after the first word of a compound: a noun), and is corrected only to a word of that kind;
 - one candidate is strictly closest, at Damerau-Levenshtein distance 1 (a swap of two neighbouring letters
   counts 1: "pour" <- "puor"), or 2 for words of 9 letters or more;
 - a changed letter (rather than a swapped, missing or extra one, or a letter typed twice: "brrom") only in nouns
@@ -138,7 +138,9 @@ def correct_typos(
         if word in COMMON_WORDS or not word.isalpha() or word in EVERYDAY_VERBS or is_known(word):
             continue
         previous = words[i - 1] if i else ","
-        if previous in _NOUN_SLOTS:
+        # a noun's place: after a determiner or an attribute, or after the first noun of a compound ("the wine botlte")
+        compound = i >= 2 and words[i - 2] in _NOUN_SLOTS and previous.isalpha()
+        if previous in _NOUN_SLOTS or compound:
             choice = correct_word(word, nouns, substitution_from=6)
         elif previous in _CLAUSE_STARTS:
             choice = correct_word(word, verbs, substitution_from=7)

@@ -119,6 +119,11 @@ DECLARED = [
     ("There's a bowl by the drawer, so open the drawer gently", ("open_drawer", ["drawer"], ["bowl"])),
     ("Close the microwave, theres a phone next to it", ("close_microwave", ["microwave"], ["phone"])),
     ("A bottle is beside the pan, pour the bowl into the pan", ("bowl_pour", ["bowl", "pan"], ["bottle"])),
+    # shorthand: a bare word that is also a verb names an object where it opens a clause and says where it is
+    ("Put phone on base. Lamp nearby, careful", ("phone_on_base", ["phone", "base"], ["lamp"])),
+    ("Open drawer. Cup on the left, careful", ("open_drawer", ["drawer"], ["cup"])),
+    # a personal pronoun is never an object ("that" is a conjunction there)
+    ("I want that you put the cube into drawer", ("put_item_in_drawer", ["cube", "drawer"], [])),
 ]  # fmt: skip
 
 

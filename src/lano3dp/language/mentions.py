@@ -193,7 +193,7 @@ def object_mentions(
             continue
         length = _known_at(words, i, known)
         previous = words[i - 1] if i else ","
-        ambiguous = word in _AMBIGUOUS_BARE and not _bare_plural_noun(words, i)
+        ambiguous = word in _AMBIGUOUS_BARE and not _bare_plural_noun(words, i) and not _bare_noun_said(words, i)
         if length and not ambiguous and word not in NOT_OBJECTS and not (word in verbs and previous in _CLAUSE_START):
             end = _noun_run(words, i, known, verbs)
             found = _mention(words, i, i, end, known, permitted)
@@ -253,6 +253,20 @@ def _bare_plural_noun(words: Sequence[str], i: int) -> bool:
         return False
     previous, following = (words[i - 1] if i else ","), (words[i + 1] if i + 1 < len(words) else ".")
     return previous not in _PRONOUNS_BEFORE_IS and following not in _DETERMINERS and following not in _MODIFIERS
+
+
+_WHERE_AFTER_BARE = frozenset(
+    """nearby near next beside behind by close on in at under below above left right is are 's , . ; : ! - and
+    or""".split()
+)
+
+
+def _bare_noun_said(words: Sequence[str], i: int) -> bool:
+    """ "lamp nearby, careful", "cup on the left": a word that is also a verb ("to lamp", "to cup") names an object
+    in shorthand when it opens a clause and what follows says where it is or ends the clause; as a verb an object
+    would follow ("cup the ball")."""
+    previous, following = (words[i - 1] if i else ","), (words[i + 1] if i + 1 < len(words) else ".")
+    return previous in _CLAUSE_END and following in _WHERE_AFTER_BARE
 
 
 def _possessive(words: Sequence[str], i: int) -> bool:

@@ -109,6 +109,7 @@ _OWN_BODY = frozenset("your the its my gripper grippers hand hands arm arms fing
 _PHRASE_ENDS = frozenset(", and or from to near next beside away inside".split())
 # Adjectives that place an object relative to others, never part of its name.
 _RELATIONAL_ADJECTIVES = frozenset("neighbouring neighboring adjacent nearby".split())
+_PERSONAL_PRONOUNS = frozenset("i you we he she they me him us myself yourself ourselves".split())
 # Words after an object word that are not the head of a compound with it ("water the plant today").
 _NOT_HEADS = frozenset("today tonight tomorrow again first too also instead yet still already soon later".split())
 _PARTICLES = frozenset("over into against with on off near to close next too by past around of".split())
@@ -812,6 +813,8 @@ class OfflineDecomposer:
                 if nouns:
                     break  # "the teacup its my favourite": a second determiner starts another phrase
                 continue
+            if word in _PERSONAL_PRONOUNS:
+                break  # "I want that you put ...": "that" is a conjunction, "you" no object
             if not nouns and word in _RELATIONAL_ADJECTIVES:
                 continue  # "the neighbouring vase" is a vase
             if not nouns and not after_determiner and len(word) > 5 and word.endswith("ly"):

@@ -214,6 +214,10 @@ REFUSALS = [
     (UnknownVerbError, "The bowl into the pan, please", "it has no verb that asks for a task"),
     (InstructionNotUnderstoodError, "Close the drawer", "no skill fits (verbs: close; objects: drawer)"),
     (InstructionNotUnderstoodError, "Pour the bowl into the drawer", "'drawer' has no place in bowl_pour (bowl, pan)"),
+    # forgetting a task, "never mind" before a task verb, and a yes/no question without its "?"
+    (NegatedCommandError, "Forget about sweeping the crumbs", "'forget about sweeping the crumbs' asks the robot"),
+    (NegatedCommandError, "Never mind pouring the bowl", "'never mind pouring the bowl' asks the robot"),
+    (InstructionNotUnderstoodError, "Does the microwave need closing", "it is a question, not a task"),
 ]  # fmt: skip
 
 
@@ -227,6 +231,8 @@ def test_what_cannot_be_accepted_is_refused_naming_it(decomposer, error, instruc
 NOT_REFUSED = [
     ("Put the block close to the drawer", ("put_item_in_drawer", ["block", "drawer"], [])),  # "close to": a place
     ("Could you put the block in the drawer?", ("put_item_in_drawer", ["block", "drawer"], [])),  # a request
+    ("Is it possible to open the drawer", ("open_drawer", ["drawer"], [])),  # a request
+    ("Never mind the lamp, pour the bowl into the pan", ("bowl_pour", ["bowl", "pan"], [])),  # a permission
     ("The drawer is open. Put the block in it.", ("put_item_in_drawer", ["block", "drawer"], [])),
     ("Take the bowl and pour it into the pan", ("bowl_pour", ["bowl", "pan"], [])),  # one task, two verbs
     ("Set the bottle upright", ("bottle_upright", ["bottle"], [])),

@@ -139,11 +139,12 @@ _GENERIC_VERBS = frozenset("put place set move take get bring transfer drop rest
 # open", "hold off on pouring"): each only when a task verb follows, so "skip the red block" is no negation.
 _NEGATORS = frozenset(
     """don't dont didn't didnt doesn't doesnt won't wouldn't wouldnt never cannot can't shouldn't mustn't needn't
-    neednt refrain skip stop quit cease abstain""".split()
+    neednt refrain skip stop quit cease abstain forget""".split()
 )
 _NOT_AFTER = frozenset("do does please must should try better need rather".split())  # "I'd rather not open ..."
 _NEGATION_FILLER = frozenset(
-    "you ever even please try to go and just accidentally dare want need wish from on with bother bothering".split()
+    "you ever even please try to go and just accidentally dare want need wish from on with bother bothering about mind"
+    .split()
 )
 _NEGATING_BEFORE = {"no": "need", "off": "hold"}  # "no need to ...", "hold off on ...": the word and the one before
 _DESTINATIONS = frozenset("in into inside onto on".split())
@@ -1265,6 +1266,7 @@ def _is_care(cue: str) -> bool:
 _QUESTION_WORDS = frozenset("is are was were do does did where what why when who which how has have am".split())
 _WH_WORDS = frozenset("where what why when who which how".split())
 _AUXILIARIES = frozenset("did do does is are was were has have had can could will would should".split())
+_YES_NO_AUXILIARIES = frozenset("is are was were does did has have".split())
 
 
 def _refuse_question(instruction: str, parse: Parse) -> None:
@@ -1277,6 +1279,10 @@ def _refuse_question(instruction: str, parse: Parse) -> None:
         asked = end < len(tokens) and tokens[end] == "?" and tokens[start] in _QUESTION_WORDS
         # "where did you put the broom", typed without its "?": a wh-word and an auxiliary ask all the same
         asked = asked or tokens[start] in _WH_WORDS and tokens[start + 1 : start + 2] in [[a] for a in _AUXILIARIES]
+        # "is the drawer open", "did the bottle fall over": an auxiliary before a noun phrase asks; not "is it
+        # possible to ...", "are you able to ...", which request
+        asked = asked or tokens[start] in _YES_NO_AUXILIARIES and tokens[start + 1 : start + 2] in [
+            [d] for d in DETERMINERS]
         if asked:
             raise InstructionNotUnderstoodError(instruction, "it is a question, not a task; say what to do")
 
@@ -1413,7 +1419,8 @@ def _own_body(words: list[str]) -> list[str]:
     (a permission, not a negated command or the cue "mind")."""
     out, i = [], 0
     while i < len(words):
-        if words[i] == "never" and words[i + 1 : i + 2] == ["mind"]:
+        gerund = words[i + 2].endswith("ing") if i + 2 < len(words) else False  # "never mind watering": negated
+        if words[i] == "never" and words[i + 1 : i + 2] == ["mind"] and not gerund:
             out.append("ignore")
             i += 2
             continue

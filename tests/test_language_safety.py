@@ -218,6 +218,14 @@ REFUSALS = [
     (NegatedCommandError, "Forget about sweeping the crumbs", "'forget about sweeping the crumbs' asks the robot"),
     (NegatedCommandError, "Never mind pouring the bowl", "'never mind pouring the bowl' asks the robot"),
     (InstructionNotUnderstoodError, "Does the microwave need closing", "it is a question, not a task"),
+    # found by the blind table 7: contractions typed without the apostrophe, a participle of state ("fully
+    # charged") read as a second request, "plus" and "after that" between two tasks
+    (NegatedCommandError, "You shouldnt open the drawer", "'shouldnt open the drawer' asks the robot"),
+    (NegatedCommandError, "There's no need to put the phone on its base, the battery is fully charged",
+     "'no need to put the phone on its base' asks the robot not to do something, and nothing else is asked"),
+    (SeveralTasksError, "Open the drawer plus close the microwave", "'close': close_microwave"),
+    (SeveralTasksError, "First pour the bowl into the pan and after that sweep the crumbs into the dustpan",
+     "'pour': bowl_pour; 'sweep': sweep_to_dustpan"),
 ]  # fmt: skip
 
 

@@ -138,8 +138,8 @@ _GENERIC_VERBS = frozenset("put place set move take get bring transfer drop rest
 # Verbs of abstaining are negators too ("refrain from putting", "skip opening", "no need to sweep", "you needn't
 # open", "hold off on pouring"): each only when a task verb follows, so "skip the red block" is no negation.
 _NEGATORS = frozenset(
-    """don't dont didn't didnt doesn't doesnt won't wouldn't wouldnt never cannot can't shouldn't mustn't needn't
-    neednt refrain skip stop quit cease abstain forget""".split()
+    """don't dont didn't didnt doesn't doesnt won't wont wouldn't wouldnt never cannot can't cant shouldn't shouldnt
+    mustn't mustnt needn't neednt refrain skip stop quit cease abstain forget""".split()
 )
 _NOT_AFTER = frozenset("do does please must should try better need rather".split())  # "I'd rather not open ..."
 _NEGATION_FILLER = frozenset(
@@ -161,7 +161,9 @@ _DEGREE = frozenset("very quite really extremely super so too rather a bit".spli
 _CLAUSE_OPENERS = frozenset(
     "please now then also just carefully gently slowly first next finally go ahead and to you".split()
 )
-_TASK_BREAKS = frozenset(". ; : ! ? , and then also".split())
+_TASK_BREAKS = frozenset(". ; : ! ? , and then also plus afterwards".split())
+_SEQUENCE_OPENERS = frozenset({("after", "that"), ("after", "this"), ("after", "which"), ("once", "done")})
+_STATE_ADVERBS = frozenset("all already still now just not almost nearly half wide".split())
 # Words between a subject and its predicate ("the mug and the cup are all in the way").
 _SUBJECT_SKIPS = frozenset("also still currently right now just all both each looks seems look seem".split())
 _COMPOUND_MODIFIERS = frozenset("water table counter trash soup door lid coffee tea wine".split())
@@ -502,8 +504,10 @@ class OfflineDecomposer:
         clauses: dict[int, list[tuple[int, str]]] = {}
         for position, verb in parse.verb_at:
             k = position - 1
-            while k >= 0 and tokens[k] in _CLAUSE_OPENERS and tokens[k] not in _TASK_BREAKS:
-                k -= 1
+            while k >= 0 and tokens[k] not in _TASK_BREAKS and (
+                tokens[k] in _CLAUSE_OPENERS or tuple(tokens[k - 1 : k + 1]) in _SEQUENCE_OPENERS
+            ):
+                k -= 2 if tuple(tokens[k - 1 : k + 1]) in _SEQUENCE_OPENERS else 1
             if k >= 0 and tokens[k] not in _TASK_BREAKS and tokens[k] not in _POLITE:
                 continue  # not a clause's verb ("the drawer is open", "a glass of water")
             clauses.setdefault(clause_of[position], []).append((position, verb))
@@ -848,8 +852,17 @@ class OfflineDecomposer:
             # A lexicon word right after a determiner or adjective is a noun ("the water", "the base"); after a
             # copula it is a state ("the drawer is open"); "close to" / "close by" is a place, not the verb.
             previous = task[i - 1] if i else ","
+            if tuple(task[i - 2 : i]) in _SEQUENCE_OPENERS:
+                previous = ","  # "after that open it": "that" is no determiner there
+            if previous in ("first", "last") and (i < 2 or task[i - 2] in _TASK_BREAKS):
+                previous = ","  # "first stand the bottle up": an adverb opening the clause, not "the first drawer"
             if previous in DETERMINERS or previous in COLOURS or previous in POSITION_WORDS or previous in _COPULAS:
                 continue
+            k = i - 1
+            while k > 0 and (task[k].endswith("ly") or task[k] in _STATE_ADVERBS):
+                k -= 1
+            if k < i - 1 and task[k] in _COPULAS:
+                continue  # "it's fully charged", "the drawer is already open": a state, not a request
             following = task[i + 1] if i + 1 < len(task) else ","
             if word == "close" and (following in ("to", "by", "beside", "behind", "next") or previous in _DEGREE):
                 continue

@@ -124,6 +124,15 @@ DECLARED = [
     ("Open drawer. Cup on the left, careful", ("open_drawer", ["drawer"], ["cup"])),
     # a personal pronoun is never an object ("that" is a conjunction there)
     ("I want that you put the cube into drawer", ("put_item_in_drawer", ["cube", "drawer"], [])),
+    # found by the blind table 7: no objects in times, in "'s" meaning "is", in what a broom sweeps, in a verb
+    # after its subject, and "stays put" is no request to put anything
+    ("Water the plant, it was dry all week", ("water_plants", ["watering can", "plant"], [])),
+    ("Close the microwave, lunch's nearly done", ("close_microwave", ["microwave"], [])),
+    ("Open the drawer, the lamp's fragile", ("open_drawer", ["drawer"], ["lamp"])),
+    ("Sweep the rice into the dustpan, avoid the lamp", ("sweep_to_dustpan", ["broom", "dustpan"], ["lamp"])),
+    ("Brush up the glitter into the dustpan", ("sweep_to_dustpan", ["broom", "dustpan"], [])),
+    ("The astrolabe stays put; open the drawer", ("open_drawer", ["drawer"], ["astrolabe"])),
+    ("Give the kettle a wide berth and close the microwave", ("close_microwave", ["microwave"], ["kettle"])),
 ]  # fmt: skip
 
 

@@ -43,8 +43,9 @@ NOT_OBJECTS = frozenset(
     spout neck stem side corner top bottom front back inside outside middle centre center left right area spot
     place way path route direction time water liquid soup drink contents content stuff dirt dust crumb crumbs mess
     debris trash rubbish one ones thing things something anything everything nothing robot gripper arm hand
-    yourself you me it them bit while moment second minute job task obstacle? way""".split()
-) - {"obstacle?"}
+    yourself you me it them bit while moment second minute job task obstacle? way hour day night week weekend month
+    year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth""".split()
+) - {"obstacle?"}  # times of day and "ok" are no things; a berth is given ("give the kettle a wide berth")
 # Words that end a noun phrase.
 _BOUNDARY = frozenset(
     """in into on onto over under from to with without of at by near next beside behind inside out up down off
@@ -60,7 +61,10 @@ _AMBIGUOUS_BARE = frozenset(
     can tin key mouse remote screen bell paper cloth mirror comb plug wire cable cord box pen tray glass glasses
     water charger station cradle item object toy pot bottle cup lamp brick marker ball flower""".split()
 )
-_COMPOUND_STOPS = frozenset("looks seems appears contains holds has have had".split())
+# Verbs said right after their subject: they end its noun phrase ("the sextant stays put", "the vase looks old").
+SUBJECT_VERBS = frozenset(
+    "looks seems appears contains holds has have had stays remains sits stands lies belongs needs goes".split()
+)
 # Phrases that permit contact with what follows them, up to the end of the clause.
 _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("may", "touch"), ("can", "touch"), ("may", "bump"), ("can", "bump"), ("may", "push"), ("can", "push"),
@@ -180,6 +184,9 @@ def object_mentions(
         if word == "that" and i == last_end:
             i += 1
             continue
+        if word in _SWEEP_VERBS and (words[i - 1] if i else ",") in _CLAUSE_START:
+            i = _after_swept(words, i + 1, known, verbs)  # "sweep the sand ...": what is swept is no object
+            continue
         if word in _DETERMINERS or word in _MODIFIERS or _possessive(words, i):
             j = i
             while j < n and (words[j] in _DETERMINERS or words[j] in _MODIFIERS or _possessive(words, j)):
@@ -261,6 +268,24 @@ _WHERE_AFTER_BARE = frozenset(
 )
 
 
+_SWEEP_VERBS = frozenset("sweep brush".split())
+
+
+def _after_swept(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
+    """Where the words after a sweeping verb end, past the material it sweeps ("the sand", "the coffee grounds"):
+    a noun no object list holds. A known object or a noun of `OBJECT_NOUNS` ("sweep the mug ...") is left to be
+    read as a mention."""
+    k = j + (words[j : j + 1] == ["up"])
+    start = k
+    while k < len(words) and (words[k] in _DETERMINERS or words[k] in _MODIFIERS):
+        k += 1
+    end = _noun_run(words, k, known, verbs)
+    nouns = words[k:end]
+    material = nouns and all(_known_at(words, m, known) == 0 for m in range(k, end)) and singular(
+        nouns[-1]) not in OBJECT_NOUNS
+    return end if material else start
+
+
 def _bare_noun_said(words: Sequence[str], i: int) -> bool:
     """ "lamp nearby, careful", "cup on the left": a word that is also a verb ("to lamp", "to cup") names an object
     in shorthand when it opens a clause and what follows says where it is or ends the clause; as a verb an object
@@ -272,7 +297,11 @@ def _bare_noun_said(words: Sequence[str], i: int) -> bool:
 def _possessive(words: Sequence[str], i: int) -> bool:
     """ "'s" after a noun ("the bowl's contents"); after "that", "it", "there" it is "is"."""
     has = words[i + 1 : i + 2] in (["been"], ["got"], ["gotten"])  # "the microwave's been left open"
-    return words[i] == "'s" and i > 0 and words[i - 1] not in _PRONOUNS_BEFORE_IS and not has
+    following = words[i + 1] if i + 1 < len(words) else "."
+    classes = _parts_of_speech(following) if following.isalpha() else frozenset()
+    # "dinner's almost ready", "the lamp's fragile": before an adverb or an adjective, "'s" is "is"
+    state = following.endswith("ly") or ("NOUN" not in classes and bool(classes & {"ADJ", "ADV"}))
+    return words[i] == "'s" and i > 0 and words[i - 1] not in _PRONOUNS_BEFORE_IS and not has and not state
 
 
 def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
@@ -294,7 +323,7 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             and word not in _MODIFIERS
             and (word not in verbs or end == j)
             and not word.endswith("ly")
-            and not (end > j and word.endswith(("ing", "ed")))
+            and not (end > j and (word.endswith(("ing", "ed")) or word in SUBJECT_VERBS))
             and end - j < 3
         ):
             end += 1

@@ -52,6 +52,7 @@ from lano3dp.language.exceptions import (
 from lano3dp.language.grounding import ground_plan
 from lano3dp.language.mentions import (
     NOT_OBJECTS,
+    SUBJECT_VERBS,
     Mention,
     enforce_mentions,
     is_adjective,
@@ -163,6 +164,7 @@ _CLAUSE_OPENERS = frozenset(
 )
 _TASK_BREAKS = frozenset(". ; : ! ? , and then also plus afterwards".split())
 _SEQUENCE_OPENERS = frozenset({("after", "that"), ("after", "this"), ("after", "which"), ("once", "done")})
+_REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
 _STATE_ADVERBS = frozenset("all already still now just not almost nearly half wide".split())
 # Words between a subject and its predicate ("the mug and the cup are all in the way").
 _SUBJECT_SKIPS = frozenset("also still currently right now just all both each looks seems look seem".split())
@@ -804,8 +806,8 @@ class OfflineDecomposer:
             if word in _COMPOUND_MODIFIERS and not nouns and following not in _BOUNDARY | _NON_OBJECTS | _SENTENCE_END:
                 nouns.append(word)  # "the water bottle", "the table lamp"
                 continue
-            if nouns and (word in _STANCE or word.endswith("ing") and len(word) > 4):
-                break  # "the phone case lying next to it": a participle ends the noun phrase
+            if nouns and (word in _STANCE or word in SUBJECT_VERBS or word.endswith("ing") and len(word) > 4):
+                break  # "the phone case lying next to it", "the vase stays put": a verb ends the noun phrase
             if nouns and word in _DETACHABLE:
                 nouns.append(word)  # "the pan lid": a lid is an object of its own, not the pan
                 continue
@@ -852,6 +854,8 @@ class OfflineDecomposer:
             # A lexicon word right after a determiner or adjective is a noun ("the water", "the base"); after a
             # copula it is a state ("the drawer is open"); "close to" / "close by" is a place, not the verb.
             previous = task[i - 1] if i else ","
+            if word == "put" and previous in _REMAIN_VERBS:
+                continue  # "the vase stays put": it is to remain where it is, not a request to put something
             if tuple(task[i - 2 : i]) in _SEQUENCE_OPENERS:
                 previous = ","  # "after that open it": "that" is no determiner there
             if previous in ("first", "last") and (i < 2 or task[i - 2] in _TASK_BREAKS):

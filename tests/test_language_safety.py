@@ -157,6 +157,10 @@ PERMITTED = [
     "Put the block in the drawer; it's okay if you nudge the mug",
     "Put the block in the drawer, you can knock the mug",
     "Put the block in the drawer, never mind the mug",
+    # found by the blind table 7: a permission said of "it", shorthand, "if you have to"
+    "Put the block in the drawer, the mug is plastic, bump it if you need to",
+    "Put the block in the drawer. mug: contact ok.",
+    "Put the block in the drawer, the mug won't break so don't worry about touching it",
 ]
 
 

@@ -20,6 +20,7 @@ What is a mention:
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -80,7 +81,9 @@ _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
     ("can", "be", "touched"), ("can", "be", "moved"), ("can", "be", "pushed"), ("may", "be", "touched"),
     ("may", "be", "moved"), ("may", "be", "pushed"), ("doesn't", "matter"), ("does", "not", "matter"),
     ("is", "fine"), ("is", "ok"), ("is", "okay"), ("is", "alright"), ("is", "allowed"), ("are", "fine"),
-    ("is", "no", "problem"), ("'s", "fine"), ("'s", "ok"), ("'s", "okay"),
+    ("is", "no", "problem"), ("'s", "fine"), ("'s", "ok"), ("'s", "okay"), ("if", "you", "have", "to"),
+    ("if", "you", "must"), ("if", "you", "need", "to"), ("if", "needed"), ("if", "necessary"), ("contact", "ok"),
+    ("contact", "okay"), ("contact", "fine"), ("contact", "allowed"),
 )  # fmt: skip
 _CLAUSE_END = frozenset(". ; : ! ? , but and then while".split())
 _CLAUSE_START = frozenset(", ; . : ! ? and then please also now just to you i kindly first next".split())
@@ -156,11 +159,31 @@ def _permitted_spans(words: Sequence[str]) -> set[int]:
                     k += 1
         for phrase in _PERMITTED_AFTER:
             if tuple(words[i : i + len(phrase)]) == phrase:
-                k = i - 1
+                k = i - 1 - (words[i - 1 : i] == [":"])  # "towel: contact ok"
                 while k >= 0 and words[k] not in _CLAUSE_END:
                     permitted.add(k)
                     k -= 1
     return permitted
+
+
+def _permit_referents(words: Sequence[str], mentions: list[Mention], permitted: set[int]) -> list[Mention]:
+    """ "the bin is unbreakable, don't worry about hitting it", "the sponge is soft, knock it if you have to": a
+    permission said of "it" or "them" (and of no object) permits the object named last before it."""
+    out = list(mentions)
+    for k in sorted(permitted):
+        if words[k] not in ("it", "them"):
+            continue
+        start, end = k, k
+        while start - 1 in permitted:
+            start -= 1
+        while end + 1 in permitted:
+            end += 1
+        if any(start <= m.index <= end for m in out):
+            continue  # the permission names its object itself
+        before = [n for n, m in enumerate(out) if m.index < start]
+        if before:
+            out[before[-1]] = dataclasses.replace(out[before[-1]], permitted=True)
+    return out
 
 
 def object_mentions(
@@ -210,7 +233,7 @@ def object_mentions(
             i = max(end, i + 1)
             continue
         i += 1
-    return mentions
+    return _permit_referents(words, mentions, permitted)
 
 
 _PRONOUNS_BEFORE_IS = frozenset("that it there here what who he she this where which".split())

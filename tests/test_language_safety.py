@@ -133,6 +133,7 @@ DECLARED = [
     ("Brush up the glitter into the dustpan", ("sweep_to_dustpan", ["broom", "dustpan"], [])),
     ("The astrolabe stays put; open the drawer", ("open_drawer", ["drawer"], ["astrolabe"])),
     ("Give the kettle a wide berth and close the microwave", ("close_microwave", ["microwave"], ["kettle"])),
+    ("Open the drawer, keep off the toy trains", ("open_drawer", ["drawer"], ["toy train"])),  # once, not "toy" too
 ]  # fmt: skip
 
 

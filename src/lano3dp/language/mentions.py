@@ -456,7 +456,7 @@ def is_obstacle(mention: Mention, plan: TaskPlan) -> bool:
         same = mention.name == obstacle.name or (
             (mention.head == obstacle.name.split()[-1] and words <= theirs) or (theirs <= words and len(theirs) > 0
                                                                                  and mention.head not in OBJECT_NOUNS)
-        )
+        ) or obstacle.name.startswith(f"{mention.name} ")  # "toy" read in "the toy car", the obstacle "toy car"
         if same and _compatible(mention, obstacle):
             return True
     return False

@@ -232,6 +232,7 @@ REFUSALS = [
     (NegatedCommandError, "Forget about sweeping the crumbs", "'forget about sweeping the crumbs' asks the robot"),
     (NegatedCommandError, "Never mind pouring the bowl", "'never mind pouring the bowl' asks the robot"),
     (InstructionNotUnderstoodError, "Does the microwave need closing", "it is a question, not a task"),
+    (NegatedCommandError, "The drawer must not be opened", "'don't open the drawer' asks the robot"),
     # found by the blind table 7: contractions typed without the apostrophe, a participle of state ("fully
     # charged") read as a second request, "plus" and "after that" between two tasks
     (NegatedCommandError, "You shouldnt open the drawer", "'shouldnt open the drawer' asks the robot"),
@@ -254,6 +255,15 @@ NOT_REFUSED = [
     ("Put the block close to the drawer", ("put_item_in_drawer", ["block", "drawer"], [])),  # "close to": a place
     ("Could you put the block in the drawer?", ("put_item_in_drawer", ["block", "drawer"], [])),  # a request
     ("Is it possible to open the drawer", ("open_drawer", ["drawer"], [])),  # a request
+    # a task asked for in the passive, and a phrase the user took back
+    ("The bowl is to be poured into the pan; the kettle must not be touched",
+     ("bowl_pour", ["bowl", "pan"], ["kettle"])),
+    ("It is requested that the microwave be closed", ("close_microwave", ["microwave"], [])),
+    ("The crumbs should be swept into the dustpan", ("sweep_to_dustpan", ["broom", "dustpan"], [])),
+    ("Put the sponge, no, the eraser, in the drawer", ("put_item_in_drawer", ["eraser", "drawer"], [])),
+    ("Open the bottle, I mean the drawer", ("open_drawer", ["drawer"], [])),
+    ("Put the block in the drawer, wait, the lamp is in the way", ("put_item_in_drawer", ["block", "drawer"],
+                                                                  ["lamp"])),
     ("Never mind the lamp, pour the bowl into the pan", ("bowl_pour", ["bowl", "pan"], [])),  # a permission
     ("The drawer is open. Put the block in it.", ("put_item_in_drawer", ["block", "drawer"], [])),
     ("Take the bowl and pour it into the pan", ("bowl_pour", ["bowl", "pan"], [])),  # one task, two verbs

@@ -164,6 +164,10 @@ _CLAUSE_OPENERS = frozenset(
 )
 _TASK_BREAKS = frozenset(". ; : ! ? , and then also plus afterwards".split())
 _SEQUENCE_OPENERS = frozenset({("after", "that"), ("after", "this"), ("after", "which"), ("once", "done")})
+# Between a passive's subject and "be": "is to", "should", "must not", "needs to", "shall", ...
+_PASSIVE_MODALS = frozenset(
+    "is are to should must shall needs need has have ought will would can could not never also please".split()
+)
 _REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
 _STATE_ADVERBS = frozenset("all already still now just not almost nearly half wide".split())
 # Words between a subject and its predicate ("the mug and the cup are all in the way").
@@ -217,6 +221,13 @@ def tokenize(text: str) -> list[str]:
         ending = next((e for e in _CLITICS if word.endswith(e) and len(word) > len(e)), None)
         words.extend([word[: -len(ending)], ending] if ending else [word])
     return words
+
+
+def _verb_lemmas(word: str) -> frozenset[str]:
+    """Base forms of an irregular participle ("swept" -> sweep) from lemminflect's lexicon."""
+    import lemminflect  # its lexicon loads on first use, not when lano3dp is imported
+
+    return frozenset(lemminflect.getAllLemmas(word).get("VERB", ()))
 
 
 @functools.lru_cache(maxsize=8192)
@@ -410,7 +421,8 @@ class OfflineDecomposer:
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         words, read_as = self._read_words(words, vocabulary)
-        words = _front_positions(_declared_placements(_polite_requests(_own_body(words))))
+        words = _self_repairs(words)
+        words = _front_positions(_declared_placements(self._passive_requests(_polite_requests(_own_body(words)))))
         mentions = object_mentions(words, [*self._vocabulary, *scene_kinds], self._single_verbs)
         words = self._resolve_one_anaphora(words, vocabulary)
         parse = Parse(tokens=list(words), warnings=[*normalized.warnings, *read_as], mentions=mentions)
@@ -444,6 +456,44 @@ class OfflineDecomposer:
             previous_noun = noun
         parse.obstacles = list(dict.fromkeys(parse.obstacles))
         return parse
+
+    def _passive_requests(self, words: list[str]) -> list[str]:
+        """ "the bowl is to be poured into the pan", "the phone should be placed on its base", "it is requested that
+        the plant be watered" -> "pour the bowl into the pan", ...: a task verb in the passive after a modal asks
+        for the task; with "not" it is a negated command ("the drawer must not be opened" -> "don't open the
+        drawer"). A collision verb stays as said ("the glass must not be touched" declares an obstacle)."""
+        out = list(words)
+        i = len(out) - 1
+        while i > 1:
+            i -= 1
+            if out[i] != "be":
+                continue
+            j = i + 1
+            while j < len(out) and out[j].endswith("ly"):
+                j += 1  # "be carefully placed"
+            if j >= len(out):
+                continue
+            task_verbs = (lemmas(out[j]) | _verb_lemmas(out[j])) & self._single_verbs - _COLLISION_VERBS
+            if not task_verbs or out[j] in self._single_verbs:
+                continue  # not a participle of a task verb ("be careful", "be open")
+            subject_end = i
+            while subject_end > 0 and out[subject_end - 1] in _PASSIVE_MODALS:
+                subject_end -= 1
+            start = subject_end
+            while start > 0 and out[start - 1] not in _SENTENCE_END | {",", "so", "and", "then"}:
+                start -= 1
+            clause = out[start:subject_end]
+            # "it is requested that the plant be watered": the subject follows "that"
+            subject_at = start + len(clause) - clause[::-1].index("that") if "that" in clause else start
+            if subject_at >= subject_end or out[subject_at] not in DETERMINERS:
+                continue
+            if subject_end == i and subject_at == start:
+                continue  # no modal and no "that": "the drawer be opened" is no request
+            modals = out[subject_end:i]
+            negated = "not" in modals or "never" in modals
+            out[start : j + 1] = [*(["don't"] if negated else []), sorted(task_verbs)[0], *out[subject_at:subject_end]]
+            i = start + 1  # what is left of the sentence before it
+        return out
 
     def _read_words(self, words: list[str], vocabulary: Sequence[str]) -> tuple[list[str], list[str]]:
         """Everyday verbs ("pop ... in") and typos of the rules' verbs and nouns, read as the words they mean;
@@ -1408,6 +1458,43 @@ def _polite_requests(words: list[str]) -> list[str]:
     for i in range(1, len(out) - 1):
         if out[i] == "mind" and out[i - 1] == "you" and out[i + 1].endswith("ing"):
             out[i] = "please"
+    return out
+
+
+_REPAIRS: tuple[tuple[str, ...], ...] = (
+    ("no",), ("sorry",), ("i", "mean"), ("no", "wait"), ("wait",), ("oops",), ("rather",), ("correction",),
+    ("actually",), ("make", "that"), ("scratch", "that"), ("or", "rather"),
+)
+
+
+def _self_repairs(words: list[str]) -> list[str]:
+    """ "put the block, no, the cube, in the drawer", "open the bottle, I mean the drawer": the user took the first
+    noun phrase back and said the second instead. The first (from its determiner) and the repair words go, so
+    the retracted object is neither acted on nor avoided."""
+    out = list(words)
+    i = 1
+    while i < len(out):
+        repair = next((r for r in _REPAIRS if out[i - 1] == "," and tuple(out[i : i + len(r)]) == r), None)
+        if repair is None:
+            i += 1
+            continue
+        k = i + len(repair) + (out[i + len(repair) : i + len(repair) + 1] == [","])
+        first = i - 2  # the retracted phrase ends before the comma
+        while first >= 0 and out[first] not in DETERMINERS and (out[first] in _MODIFIERS or out[first].isalpha()) and (
+            out[first] not in _BOUNDARY
+        ) and i - 2 - first < 4:
+            first -= 1
+        end = k + 1
+        while end < len(out) and end - k < 5 and out[end].isalpha() and out[end] not in _BOUNDARY:
+            end += 1
+        said_instead = end >= len(out) or out[end] not in _COPULAS | SUBJECT_VERBS  # not "wait, the cup is ..."
+        if k < len(out) and out[k] in DETERMINERS and out[first : first + 1] in [[d] for d in DETERMINERS] and (
+            first < i - 2 and said_instead
+        ):
+            out[first:k] = []
+            i = first + 1
+            continue
+        i += 1
     return out
 
 

@@ -262,6 +262,7 @@ NOT_REFUSED = [
     ("The crumbs should be swept into the dustpan", ("sweep_to_dustpan", ["broom", "dustpan"], [])),
     ("Put the sponge, no, the eraser, in the drawer", ("put_item_in_drawer", ["eraser", "drawer"], [])),
     ("Open the bottle, I mean the drawer", ("open_drawer", ["drawer"], [])),
+    ("um so put the phone on its base pls, dont hit the vase lol", ("phone_on_base", ["phone", "base"], ["vase"])),
     ("Put the block in the drawer, wait, the lamp is in the way", ("put_item_in_drawer", ["block", "drawer"],
                                                                   ["lamp"])),
     ("Never mind the lamp, pour the bowl into the pan", ("bowl_pour", ["bowl", "pan"], [])),  # a permission

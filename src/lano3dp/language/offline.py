@@ -125,6 +125,8 @@ _CLAUSE_ENDS = frozenset({"then", "while", "but", "before", "after", "when", "so
 _POLITE = frozenset(
     "please could would can will you robot okay ok now i need want to like kindly go ahead hey hi hello um uh".split()
 )
+# Hesitations and chat shorthand: no word of the task ("don't hit the lamp lol" names a lamp)
+_FILLERS = frozenset("um umm uh uhm er erm hmm lol lmao rofl thx ty pls plz rn btw tbh idk omg".split())
 _COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands stand lies lie".split())
 _PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
 _WARNINGS = frozenset("careful caution warning attention heads".split())
@@ -417,7 +419,7 @@ class OfflineDecomposer:
             InputRejectedError: the text is refused before it is read (too long, mixed scripts, ...).
         """
         normalized = normalize_instruction(instruction)
-        words = tokenize(normalized.text)
+        words = [w for w in tokenize(normalized.text) if w not in _FILLERS]
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         words, read_as = self._read_words(words, vocabulary)

@@ -263,6 +263,10 @@ NOT_REFUSED = [
     ("Put the sponge, no, the eraser, in the drawer", ("put_item_in_drawer", ["eraser", "drawer"], [])),
     ("Open the bottle, I mean the drawer", ("open_drawer", ["drawer"], [])),
     ("um so put the phone on its base pls, dont hit the vase lol", ("phone_on_base", ["phone", "base"], ["vase"])),
+    # one of several picked by an attribute, and a landmark after a superlative of place
+    ("Put the rightmost of the three cubes in the drawer", ("put_item_in_drawer", ["rightmost cube", "drawer"], [])),
+    ("Pour the smaller of the two bowls into the pan", ("bowl_pour", ["small bowl", "pan"], [])),
+    ("Open the bottle closest to the kettle", ("open_wine_bottle", ["bottle"], ["kettle"])),
     ("Put the block in the drawer, wait, the lamp is in the way", ("put_item_in_drawer", ["block", "drawer"],
                                                                   ["lamp"])),
     ("Never mind the lamp, pour the bowl into the pan", ("bowl_pour", ["bowl", "pan"], [])),  # a permission

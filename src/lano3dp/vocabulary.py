@@ -23,6 +23,10 @@ SIZE_WORDS = {
     "large": "large", "big": "large", "huge": "large", "giant": "large",
     "medium": "medium", "mid": "medium", "middle": "medium",
     "tall": "tall", "short": "short",
+    # comparatives and superlatives pick the same object among two or more ("the larger of the two bowls")
+    "larger": "large", "largest": "large", "bigger": "large", "biggest": "large", "smaller": "small",
+    "smallest": "small", "tinier": "small", "tiniest": "small", "taller": "tall", "tallest": "tall",
+    "shorter": "short", "shortest": "short",
 }  # fmt: skip
 _COLOUR_ALIASES = {"gray": "grey", "golden": "gold"}
 # Nouns of things found on a table, beyond the skills' own words. Language counts each one said as an object

@@ -423,7 +423,7 @@ class OfflineDecomposer:
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         words, read_as = self._read_words(words, vocabulary)
-        words = _self_repairs(words)
+        words = _partitives(_self_repairs(words))
         words = _front_positions(_declared_placements(self._passive_requests(_polite_requests(_own_body(words)))))
         mentions = object_mentions(words, [*self._vocabulary, *scene_kinds], self._single_verbs)
         words = self._resolve_one_anaphora(words, vocabulary)
@@ -445,9 +445,10 @@ class OfflineDecomposer:
         for noun in parse.nouns:
             noun.in_task = not with_verb or sentence[noun.index] in with_verb
             k = noun.index - 1
-            while k >= 0 and (task[k] in DETERMINERS or task[k] in _MODIFIERS):
+            while k >= 0 and (task[k] in DETERMINERS or task[k] in _MODIFIERS) and not _nearest_to(task, k):
                 k -= 1
-            noun.landmark = k >= 0 and task[k] in _LOCATIVES | {"to"} and (task[k] != "to" or task[k - 1] in _LOCATIVES)
+            noun.landmark = k >= 0 and (task[k] in _LOCATIVES | {"to"} and (task[k] != "to" or task[k - 1] in _LOCATIVES)
+                                        or _nearest_to(task, k))
             noun.destination = k >= 0 and task[k] in ("into", "onto")
             noun.source = k >= 0 and (task[k] in ("from", "off") or (task[k] == "of" and task[k - 1 : k] == ["out"]))
             existential = task[k] == "theres" if k >= 0 else False
@@ -1463,6 +1464,34 @@ def _polite_requests(words: list[str]) -> list[str]:
     return out
 
 
+_COUNTS = frozenset("two three four five several both".split())
+
+
+_RELATIVE_SUPERLATIVES = frozenset({("nearest",), ("closest",), ("farthest",), ("furthest",)})
+
+
+def _nearest_to(task: Sequence[str], k: int) -> bool:
+    """ "the bottle nearest (to) the microwave": a superlative of place before a determiner relates to a
+    landmark."""
+    superlative = (task[k],) in _RELATIVE_SUPERLATIVES or task[k] == "to" and k > 0 and (
+        task[k - 1],) in _RELATIVE_SUPERLATIVES
+    return superlative and task[k + 1 : k + 2] in [[d] for d in DETERMINERS]
+
+
+def _partitives(words: list[str]) -> list[str]:
+    """ "the leftmost of the three blocks", "the larger of the two bowls" -> "the leftmost block", "the larger
+    bowl": the attribute picks one of the objects named after "of"."""
+    out = list(words)
+    i = 1
+    while i + 3 < len(out):
+        picks = out[i] in _MODIFIERS and out[i - 1] in ("the", "a") and out[i + 1] == "of" and out[i + 2] == "the"
+        k = i + 3 + (out[i + 3] in _COUNTS)
+        if picks and k < len(out) and out[k].isalpha() and out[k] not in _BOUNDARY:
+            out[i + 1 : k + 1] = [singular(out[k])]
+        i += 1
+    return out
+
+
 _REPAIRS: tuple[tuple[str, ...], ...] = (
     ("no",), ("sorry",), ("i", "mean"), ("no", "wait"), ("wait",), ("oops",), ("rather",), ("correction",),
     ("actually",), ("make", "that"), ("scratch", "that"), ("or", "rather"),
@@ -1563,10 +1592,16 @@ def _front_positions(words: list[str]) -> list[str]:
             i += 1
             continue
         stop = i + len(post)
-        if post in (("nearest",), ("closest",), ("farthest",), ("furthest",)) and out[stop : stop + 1] == ["to"]:
-            stop += 1  # "closest to you / to the robot": the reference point is dropped with it
-            while stop < len(out) and out[stop] in ("you", "me", "the", "robot", "us", "gripper", "arm"):
-                stop += 1
+        if post in _RELATIVE_SUPERLATIVES:
+            after = out[stop + (out[stop : stop + 1] == ["to"]) :]
+            viewer = after[:1] in (["you"], ["me"], ["us"]) or after[:2] in (["the", "robot"], ["the", "gripper"])
+            if after[:1] in [[d] for d in DETERMINERS] and not viewer:
+                i += 1  # "the bottle nearest (to) the microwave": relative to another object, a landmark
+                continue
+            if out[stop : stop + 1] == ["to"]:
+                stop += 1  # "closest to you / to the robot": the reference point is dropped with it
+                while stop < len(out) and out[stop] in ("you", "me", "the", "robot", "us", "gripper", "arm"):
+                    stop += 1
         out[start:stop] = [_POST_POSITIONS[post], *out[start:i]]
         i = stop
     return out

@@ -233,6 +233,7 @@ REFUSALS = [
     (NegatedCommandError, "Never mind pouring the bowl", "'never mind pouring the bowl' asks the robot"),
     (InstructionNotUnderstoodError, "Does the microwave need closing", "it is a question, not a task"),
     (NegatedCommandError, "The drawer must not be opened", "'don't open the drawer' asks the robot"),
+    (NegatedCommandError, "Why didn't you water the plant", "'didn't you water the plant' asks the robot"),
     # found by the blind table 7: contractions typed without the apostrophe, a participle of state ("fully
     # charged") read as a second request, "plus" and "after that" between two tasks
     (NegatedCommandError, "You shouldnt open the drawer", "'shouldnt open the drawer' asks the robot"),
@@ -255,6 +256,9 @@ NOT_REFUSED = [
     ("Put the block close to the drawer", ("put_item_in_drawer", ["block", "drawer"], [])),  # "close to": a place
     ("Could you put the block in the drawer?", ("put_item_in_drawer", ["block", "drawer"], [])),  # a request
     ("Is it possible to open the drawer", ("open_drawer", ["drawer"], [])),  # a request
+    ("Don't forget to water the plant", ("water_plants", ["watering can", "plant"], [])),  # two negations
+    ("Why don't you close the microwave", ("close_microwave", ["microwave"], [])),  # a suggestion
+    ("Come on, let's pour the bowl into the pan together", ("bowl_pour", ["bowl", "pan"], [])),
     # a task asked for in the passive, and a phrase the user took back
     ("The bowl is to be poured into the pan; the kettle must not be touched",
      ("bowl_pour", ["bowl", "pan"], ["kettle"])),

@@ -247,7 +247,7 @@ _ADJECTIVES = frozenset(
 
 
 @functools.cache
-def _parts_of_speech(word: str) -> frozenset[str]:
+def word_classes(word: str) -> frozenset[str]:
     """The word classes an English lexicon gives `word` ("NOUN", "ADJ", "VERB", ...; empty if it lacks it).
     lemminflect's lexicon rather than a hand list: which words are nouns is open-ended ("kitchen", "cereal"),
     and suffixes mislead ("kitchen" ends like "wooden")."""
@@ -264,7 +264,7 @@ def is_adjective(word: str) -> bool:
         return True
     if word in _COMPOUND_MODIFIERS or word in OBJECT_NOUNS:
         return False
-    classes = _parts_of_speech(word)
+    classes = word_classes(word)
     if "NOUN" in classes:
         return False  # a noun before a noun names a kind of it, also where it can be an adjective ("cereal")
     if "ADJ" in classes:
@@ -321,7 +321,7 @@ def _possessive(words: Sequence[str], i: int) -> bool:
     """ "'s" after a noun ("the bowl's contents"); after "that", "it", "there" it is "is"."""
     has = words[i + 1 : i + 2] in (["been"], ["got"], ["gotten"])  # "the microwave's been left open"
     following = words[i + 1] if i + 1 < len(words) else "."
-    classes = _parts_of_speech(following) if following.isalpha() else frozenset()
+    classes = word_classes(following) if following.isalpha() else frozenset()
     # "dinner's almost ready", "the lamp's fragile": before an adverb or an adjective, "'s" is "is"
     state = following.endswith("ly") or ("NOUN" not in classes and bool(classes & {"ADJ", "ADV"}))
     return words[i] == "'s" and i > 0 and words[i - 1] not in _PRONOUNS_BEFORE_IS and not has and not state
@@ -370,7 +370,9 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     ):
         chunk.pop(0)  # "the open drawer", "the fallen bottle", "the ceramic mug": the object is the noun
     # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)
-    material = len(chunk) == 1 and chunk[0] in _ADJECTIVES and not _known_at(chunk, 0, known)  # not "the glass"
+    # a lone adjective names nothing ("they're both hot"; "a good robot" once "robot" is dropped)
+    material = len(chunk) == 1 and (chunk[0] in _ADJECTIVES or is_adjective(chunk[0])) and not _known_at(
+        chunk, 0, known)  # not "the glass"
     if not chunk or (len(chunk) == 1 and chunk[0] in NOT_OBJECTS) or material:
         return None  # "the left side", "they're both hot": no object
     if _contents_after_of(words, j):

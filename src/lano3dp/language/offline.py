@@ -58,6 +58,7 @@ from lano3dp.language.mentions import (
     is_adjective,
     names_another,
     object_mentions,
+    word_classes,
 )
 from lano3dp.language.normalize import normalize_instruction
 from lano3dp.language.plan import MAX_NAME_CHARS, MAX_OBSTACLES, ObjectRef, TaskPlan
@@ -144,6 +145,7 @@ _NEGATORS = frozenset(
     """don't dont didn't didnt doesn't doesnt won't wont wouldn't wouldnt never cannot can't cant shouldn't shouldnt
     mustn't mustnt needn't neednt refrain skip stop quit cease abstain forget""".split()
 )
+_ABSTAIN_VERBS = frozenset("refrain skip stop quit cease abstain forget".split())
 _NOT_AFTER = frozenset("do does please must should try better need rather".split())  # "I'd rather not open ..."
 _NEGATION_FILLER = frozenset(
     "you ever even please try to go and just accidentally dare want need wish from on with bother bothering about mind"
@@ -522,6 +524,10 @@ class OfflineDecomposer:
         words become clause breaks (its objects stay mentions, so they are avoided). A negated collision verb
         ("don't move the mug") is an obstacle cue instead, unless it says where to ("don't move it into ...")."""
         for i, word in enumerate(words):
+            if word in _ABSTAIN_VERBS and i and words[i - 1] in _NEGATORS | {"not"}:
+                continue  # "don't forget to close it", "never stop ...": two negations ask for the task
+            if word in ("don't", "dont") and i and words[i - 1] == "why" and words[i + 1 : i + 2] == ["you"]:
+                continue  # "why don't you open the drawer" suggests the task
             negates = (
                 word in _NEGATORS
                 or word == "not" and i and words[i - 1] in _NOT_AFTER
@@ -1033,6 +1039,9 @@ class OfflineDecomposer:
             return False  # "the drawer handle", "the plant today", "the toy quickly"
         if head.endswith(("s", "ed", "ing")) and head not in OBJECT_NOUNS:
             return False  # "the drawer ends up open", "the block stays": a verb after its subject
+        classes = word_classes(head) if head.isalpha() else frozenset()
+        if classes and "NOUN" not in classes:
+            return False  # "open the bottle together": an adverb, no noun the bottle word could be part of
         unknown = head not in self._known_words
         table_object = head in OBJECT_NOUNS and head not in self._vocabulary and head not in _NON_OBJECTS
         if not head.isalpha() or not (unknown or table_object):
@@ -1461,6 +1470,10 @@ def _polite_requests(words: list[str]) -> list[str]:
     for i in range(1, len(out) - 1):
         if out[i] == "mind" and out[i - 1] == "you" and out[i + 1].endswith("ing"):
             out[i] = "please"
+        if out[i - 1] == "let" and out[i] in ("'s", "us") and (i < 2 or out[i - 2] in _TASK_BREAKS):
+            out[i - 1 : i + 1] = [",", "please"]  # "let's open the bottle" asks for it
+        if out[i - 1] == "come" and out[i] == "on" and (i < 2 or out[i - 2] in _TASK_BREAKS):
+            out[i - 1 : i + 1] = [",", "please"]  # "come on, ...": encouragement, not a verb of moving
     return out
 
 

@@ -234,6 +234,11 @@ REFUSALS = [
     (InstructionNotUnderstoodError, "Does the microwave need closing", "it is a question, not a task"),
     (NegatedCommandError, "The drawer must not be opened", "'don't open the drawer' asks the robot"),
     (NegatedCommandError, "Why didn't you water the plant", "'didn't you water the plant' asks the robot"),
+    # found by the blind table 8: a task asked for and taken back; what happened before is no request
+    (NegatedCommandError, "Close the microwave. Hmm, actually, don't close it",
+     "it asks for close_microwave and also not to 'close'; say which is meant"),
+    (NegatedCommandError, "Last week you opened the drawer and it jammed, so don't open it again",
+     "'don't open it again' asks the robot not to do something, and nothing else is asked"),
     # found by the blind table 7: contractions typed without the apostrophe, a participle of state ("fully
     # charged") read as a second request, "plus" and "after that" between two tasks
     (NegatedCommandError, "You shouldnt open the drawer", "'shouldnt open the drawer' asks the robot"),
@@ -257,6 +262,10 @@ NOT_REFUSED = [
     ("Could you put the block in the drawer?", ("put_item_in_drawer", ["block", "drawer"], [])),  # a request
     ("Is it possible to open the drawer", ("open_drawer", ["drawer"], [])),  # a request
     ("Don't forget to water the plant", ("water_plants", ["watering can", "plant"], [])),  # two negations
+    ("Open the drawer but don't open the bottle", ("open_drawer", ["drawer"], ["bottle"])),  # another object
+    ("This morning I spilled rice everywhere; sweep it into the dustpan", ("sweep_to_dustpan", ["broom", "dustpan"],
+                                                                          [])),
+    ("The drawer was opened by someone, close the microwave", ("close_microwave", ["microwave"], ["drawer"])),
     ("Why don't you close the microwave", ("close_microwave", ["microwave"], [])),  # a suggestion
     ("Come on, let's pour the bowl into the pan together", ("bowl_pour", ["bowl", "pan"], [])),
     # a task asked for in the passive, and a phrase the user took back

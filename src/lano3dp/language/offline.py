@@ -227,6 +227,18 @@ def tokenize(text: str) -> list[str]:
     return words
 
 
+@functools.lru_cache(maxsize=4096)
+def _past_form(word: str) -> bool:
+    """Whether `word` is a past tense or participle that differs from its verb's base ("stood", "opened"; not
+    "put", "set"), by lemminflect's lexicon. A request is in the base form; the passive is rewritten before."""
+    import lemminflect
+
+    return any(
+        word != lemma and word in (*lemminflect.getInflection(lemma, "VBD"), *lemminflect.getInflection(lemma, "VBN"))
+        for lemma in lemminflect.getAllLemmas(word).get("VERB", ())
+    )
+
+
 def _verb_lemmas(word: str) -> frozenset[str]:
     """Base forms of an irregular participle ("swept" -> sweep) from lemminflect's lexicon."""
     import lemminflect  # its lexicon loads on first use, not when lano3dp is imported
@@ -318,6 +330,7 @@ class Parse:
     cue_of: dict[ObjectRef, str] = field(default_factory=dict)  # obstacle -> the cue that declared it
     mentions: list[Mention] = field(default_factory=list)  # every object named (mentions.object_mentions)
     negated: list[str] = field(default_factory=list)  # negated task clauses ("don't open the drawer")
+    negated_verbs: list[tuple[str, str]] = field(default_factory=list)  # (lexicon verb, the word after its object)
     verb_at: list[tuple[int, str]] = field(default_factory=list)  # (token index, verb) of task verbs
 
 
@@ -372,6 +385,13 @@ class OfflineDecomposer:
         _refuse_question(instruction, parse)
         self._check_one_task(instruction, parse)
         skill = self._choose_skill(instruction, parse)
+        taken_back = [
+            v for v, said_of in parse.negated_verbs if skill.name in self._verbs.get(v, ())
+            and (said_of in ("it", "that", "this", "them") or any(_exact(slot, said_of) for slot in skill.slots))
+        ]  # not "open the drawer but don't open the bottle"
+        if taken_back:  # "open the bottle -- actually no, don't open it": asked for and taken back
+            raise NegatedCommandError(
+                instruction, f"it asks for {skill.name} and also not to '{taken_back[0]}'; say which is meant")
         self._check_fit(instruction, skill, parse)
         self._resolve_references(instruction, skill, parse)
         targets, target_nouns = self._fill_slots(skill, parse.nouns)
@@ -455,7 +475,7 @@ class OfflineDecomposer:
             noun.source = k >= 0 and (task[k] in ("from", "off") or (task[k] == "of" and task[k - 1 : k] == ["out"]))
             existential = task[k] == "theres" if k >= 0 else False
             existential = existential or (k >= 1 and task[k] in _COPULAS and task[k - 1] == "there")
-            noun.declared = existential or task[noun.end : noun.end + 1] in (["is"], ["are"], ["'s"], ["'re"], ["sits"])
+            noun.declared = existential or (noun.end < len(task) and task[noun.end] in _COPULAS)
             if k >= 0 and task[k] in ("and", "or") and previous_noun is not None and previous_noun.landmark:
                 noun.landmark = True  # "past the mug and the jar": both are landmarks
             previous_noun = noun
@@ -553,6 +573,11 @@ class OfflineDecomposer:
                     continue
             start = i - 1 if i and words[i - 1] in ("do", "try", "hold") else i
             parse.negated.append(" ".join(words[start:end]))
+            k = j + 1
+            while k < end and (words[k] in DETERMINERS or words[k] in _MODIFIERS or words[k] in _PARTICLES):
+                k += 1
+            said_of = singular(words[k]) if k < end else "it"  # "don't open it", "don't open the bottle"
+            parse.negated_verbs.extend((verb, said_of) for verb in sorted(forms & self._single_verbs))
             for k in range(start, end):
                 words[k] = ","
 
@@ -910,6 +935,8 @@ class OfflineDecomposer:
             heads = {v for v in self._phrasal if v[0] in lemmas(word)}
             if not hits and not heads:
                 continue
+            if _past_form(word):
+                continue  # "you stood the bottle up yesterday", "I spilled soil": what happened, not a request
             # A lexicon word right after a determiner or adjective is a noun ("the water", "the base"); after a
             # copula it is a state ("the drawer is open"); "close to" / "close by" is a place, not the verb.
             previous = task[i - 1] if i else ","

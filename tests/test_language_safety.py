@@ -161,6 +161,7 @@ PERMITTED = [
     # found by the blind table 7: a permission said of "it", shorthand, "if you have to"
     "Put the block in the drawer, the mug is plastic, bump it if you need to",
     "Put the block in the drawer. mug: contact ok.",
+    "Put the block in the drawer; contact with the mug is fine",
     "Put the block in the drawer, the mug won't break so don't worry about touching it",
 ]
 
@@ -235,6 +236,7 @@ REFUSALS = [
     (NegatedCommandError, "The drawer must not be opened", "'don't open the drawer' asks the robot"),
     (NegatedCommandError, "Why didn't you water the plant", "'didn't you water the plant' asks the robot"),
     # found by the blind table 8: a task asked for and taken back; what happened before is no request
+    (ContradictionError, "Open the drawer while keeping zero contact with any drawer", "'drawer' is the object"),
     (NegatedCommandError, "Close the microwave. Hmm, actually, don't close it",
      "it asks for close_microwave and also not to 'close'; say which is meant"),
     (NegatedCommandError, "Last week you opened the drawer and it jammed, so don't open it again",
@@ -263,6 +265,10 @@ NOT_REFUSED = [
     ("Is it possible to open the drawer", ("open_drawer", ["drawer"], [])),  # a request
     ("Don't forget to water the plant", ("water_plants", ["watering can", "plant"], [])),  # two negations
     ("Open the drawer but don't open the bottle", ("open_drawer", ["drawer"], ["bottle"])),  # another object
+    # "contact with" is no permission by itself: "avoid / no contact with X" avoids X
+    ("Open the drawer, avoid contact with the vase", ("open_drawer", ["drawer"], ["vase"])),
+    ("Open the drawer, no contact with the vase", ("open_drawer", ["drawer"], ["vase"])),
+    ("Open the drawer; the lamp must be avoided", ("open_drawer", ["drawer"], ["lamp"])),
     ("This morning I spilled rice everywhere; sweep it into the dustpan", ("sweep_to_dustpan", ["broom", "dustpan"],
                                                                           [])),
     ("The drawer was opened by someone, close the microwave", ("close_microwave", ["microwave"], ["drawer"])),

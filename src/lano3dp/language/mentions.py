@@ -45,7 +45,7 @@ NOT_OBJECTS = frozenset(
     place way path route direction time water liquid soup drink contents content stuff dirt dust crumb crumbs mess
     debris trash rubbish one ones thing things something anything everything nothing robot gripper arm hand
     yourself you me it them bit while moment second minute job task obstacle? way hour day night week weekend month
-    year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth""".split()
+    year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact""".split()
 ) - {"obstacle?"}  # times of day and "ok" are no things; a berth is given ("give the kettle a wide berth")
 # Words that end a noun phrase.
 _BOUNDARY = frozenset(
@@ -72,7 +72,7 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("may", "move"), ("can", "move"), ("ok", "to"), ("okay", "to"), ("fine", "to"), ("alright", "to"),
     ("free", "to"), ("don't", "worry", "about"), ("dont", "worry", "about"), ("do", "not", "worry", "about"),
     ("no", "need", "to", "avoid"), ("ignore",), ("doesn't", "matter"), ("does", "not", "matter"),
-    ("allowed", "to", "touch"), ("contact", "with"), ("may", "knock"), ("can", "knock"), ("may", "brush"),
+    ("allowed", "to", "touch"), ("may", "knock"), ("can", "knock"), ("may", "brush"),
     ("can", "brush"), ("may", "nudge"), ("can", "nudge"), ("fine", "if"), ("ok", "if"), ("okay", "if"),
     ("alright", "if"), ("matter", "if"),
 )  # fmt: skip

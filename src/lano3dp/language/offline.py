@@ -446,7 +446,8 @@ class OfflineDecomposer:
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         words, read_as = self._read_words(words, vocabulary)
         words = _partitives(_self_repairs(words))
-        words = _front_positions(_declared_placements(self._passive_requests(_polite_requests(_own_body(words)))))
+        words = self._passive_requests(_polite_requests(_own_body(words)))
+        words = _front_positions(_declared_placements(_contact_cues(words)))
         mentions = object_mentions(words, [*self._vocabulary, *scene_kinds], self._single_verbs)
         words = self._resolve_one_anaphora(words, vocabulary)
         parse = Parse(tokens=list(words), warnings=[*normalized.warnings, *read_as], mentions=mentions)
@@ -498,9 +499,9 @@ class OfflineDecomposer:
                 j += 1  # "be carefully placed"
             if j >= len(out):
                 continue
-            task_verbs = (lemmas(out[j]) | _verb_lemmas(out[j])) & self._single_verbs - _COLLISION_VERBS
+            task_verbs = (lemmas(out[j]) | _verb_lemmas(out[j])) & (self._single_verbs | {"avoid"}) - _COLLISION_VERBS
             if not task_verbs or out[j] in self._single_verbs:
-                continue  # not a participle of a task verb ("be careful", "be open")
+                continue  # not a participle of a task verb ("be careful", "be open"); "is to be avoided" is a cue
             subject_end = i
             while subject_end > 0 and out[subject_end - 1] in _PASSIVE_MODALS:
                 subject_end -= 1
@@ -1565,6 +1566,24 @@ def _self_repairs(words: list[str]) -> list[str]:
             out[first:k] = []
             i = first + 1
             continue
+        i += 1
+    return out
+
+
+_NO_CONTACT = frozenset("avoid avoiding no zero without minimal minimise minimize minimising minimizing prevent".split())
+
+
+def _contact_cues(words: list[str]) -> list[str]:
+    """ "avoid contact with the vase", "no contact with the vase", "zero contact with any drawer" -> "avoid the
+    vase": contact is no object, the object after "with" is the one to avoid. ("contact with the vase is fine"
+    permits contact: `mentions`.)"""
+    out, i = [], 0
+    while i < len(words):
+        if words[i] in _NO_CONTACT and words[i + 1 : i + 3] == ["contact", "with"]:
+            out.append("avoid")
+            i += 3
+            continue
+        out.append(words[i])
         i += 1
     return out
 

@@ -45,8 +45,15 @@ NOT_OBJECTS = frozenset(
     place way path route direction time water liquid soup drink contents content stuff dirt dust crumb crumbs mess
     debris trash rubbish one ones thing things something anything everything nothing robot gripper arm hand
     yourself you me it them bit while moment second minute job task obstacle? way hour day night week weekend month
-    year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact""".split()
-) - {"obstacle?"}  # times of day and "ok" are no things; a berth is given ("give the kettle a wide berth")
+    year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact itself
+    themselves""".split()
+) - {"obstacle?"}
+# Units of distance: "the grinder 8 cm to the right of the pan" names a grinder.
+UNITS = frozenset(
+    """cm mm centimetre centimetres centimeter centimeters millimetre millimetres metre metres meter meters inch
+    inches foot feet""".split()
+)
+NOT_OBJECTS = NOT_OBJECTS | UNITS  # times of day and "ok" are no things; a berth is given ("give the kettle a wide berth")
 # Words that end a noun phrase.
 _BOUNDARY = frozenset(
     """in into on onto over under from to with without of at by near next beside behind inside out up down off
@@ -64,7 +71,8 @@ _AMBIGUOUS_BARE = frozenset(
 )
 # Verbs said right after their subject: they end its noun phrase ("the sextant stays put", "the vase looks old").
 SUBJECT_VERBS = frozenset(
-    "looks seems appears contains holds has have had stays remains sits stands lies belongs needs goes".split()
+    "looks seems appears contains holds has have had stays remains sits stands lies belongs needs goes got gets"
+    .split()
 )
 # Phrases that permit contact with what follows them, up to the end of the clause.
 _PERMISSIONS: tuple[tuple[str, ...], ...] = (
@@ -361,7 +369,7 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     known_ends = [k + _known_at(chunk, k, known) for k in range(len(chunk)) if _known_at(chunk, k, known)]
     if known_ends:
         chunk = chunk[: max(known_ends)]  # "the mug holder" -> mug: the known noun is the head
-    while chunk and chunk[-1] in NOT_OBJECTS and not _known_at(chunk, len(chunk) - 1, known):
+    while chunk and _not_object(chunk[-1]) and not _known_at(chunk, len(chunk) - 1, known):
         if len(chunk) > 1 and chunk[-1] in _DETACHABLE:
             break  # "the pan lid": a lid comes off, so it is an object of its own
         chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
@@ -373,7 +381,7 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     # a lone adjective names nothing ("they're both hot"; "a good robot" once "robot" is dropped)
     material = len(chunk) == 1 and (chunk[0] in _ADJECTIVES or is_adjective(chunk[0])) and not _known_at(
         chunk, 0, known)  # not "the glass"
-    if not chunk or (len(chunk) == 1 and chunk[0] in NOT_OBJECTS) or material:
+    if not chunk or (len(chunk) == 1 and _not_object(chunk[0])) or material:
         return None  # "the left side", "they're both hot": no object
     if _contents_after_of(words, j):
         return None
@@ -398,6 +406,10 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     return Mention(" ".join(chunk), color, size, position, j + len(chunk) - 1, bool(set(range(j, end)) & permitted))
 
 
+def _not_object(word: str) -> bool:
+    return word in NOT_OBJECTS or singular(word) in NOT_OBJECTS  # "at all times"
+
+
 def _contents_after_of(words: Sequence[str], i: int) -> bool:
     """ "a bottle of wine", "the glass of water": what a container holds is not another object."""
     return i >= 2 and words[i - 1] == "of" and singular(words[i - 2]) in _CONTAINERS_OF
@@ -407,7 +419,9 @@ def _contents_after_of(words: Sequence[str], i: int) -> bool:
 
 
 def _compatible(mention: Mention, ref: ObjectRef) -> bool:
-    return all(getattr(mention, a) in (None, getattr(ref, a)) for a in ("color", "size"))
+    """No attribute differs; an obstacle said without one ("that mug") covers the mention with it ("the white
+    mug"), as grounding avoids every object its phrase names."""
+    return all(getattr(ref, a) is None or getattr(mention, a) in (None, getattr(ref, a)) for a in ("color", "size"))
 
 
 def _exact_synonyms(skill: SkillSpec | None, k: int, registry=None) -> set[str]:

@@ -53,6 +53,7 @@ from lano3dp.language.grounding import ground_plan
 from lano3dp.language.mentions import (
     NOT_OBJECTS,
     SUBJECT_VERBS,
+    UNITS,
     Mention,
     enforce_mentions,
     is_adjective,
@@ -91,7 +92,7 @@ _MODIFIERS = COLOURS | SIZE_WORDS.keys() | POSITION_WORDS.keys()
 _BOUNDARY = frozenset(
     """in into on onto over under from to with without of at by near next beside behind inside out up down
     off away back for using toward towards across through around while and or but then so that which who
-    please again too there here it them is are be was were can could would will should if when before 's
+    please again too there here it them is are be was were can could would will should must shall might if when before 's
     after until as not don't do does very now just also still nearby close somewhere past 're 'm 've 'll 'd""".split()
 )
 # Nouns that never name an object to look at.
@@ -99,7 +100,7 @@ _NON_OBJECTS = frozenset(
     """left right side top bottom middle front back edge corner table counter way time contents content
     water liquid soup stuff one ones area spot place workspace dirt dust crumb crumbs trash mess debris
     cork lid door what thing everything something nothing anything robot okay ok sure bit path route""".split()
-)
+) | UNITS
 _COLLISION_VERBS = frozenset(
     """touch hit bump knock disturb topple collide crash brush graze nudge move tip spill strike smash break
     jostle upset rattle scrape scratch damage push shove bang clip snag contact run go come""".split()
@@ -111,7 +112,7 @@ _OWN_BODY = frozenset("your the its my gripper grippers hand hands arm arms fing
 _PHRASE_ENDS = frozenset(", and or from to near next beside away inside".split())
 # Adjectives that place an object relative to others, never part of its name.
 _RELATIONAL_ADJECTIVES = frozenset("neighbouring neighboring adjacent nearby".split())
-_PERSONAL_PRONOUNS = frozenset("i you we he she they me him us myself yourself ourselves".split())
+_PERSONAL_PRONOUNS = frozenset("i you we he she they me him us myself yourself ourselves itself themselves".split())
 # Words after an object word that are not the head of a compound with it ("water the plant today").
 _NOT_HEADS = frozenset("today tonight tomorrow again first too also instead yet still already soon later".split())
 _PARTICLES = frozenset("over into against with on off near to close next too by past around of".split())
@@ -127,7 +128,8 @@ _POLITE = frozenset(
     "please could would can will you robot okay ok now i need want to like kindly go ahead hey hi hello um uh".split()
 )
 # Hesitations and chat shorthand: no word of the task ("don't hit the lamp lol" names a lamp)
-_FILLERS = frozenset("um umm uh uhm er erm hmm lol lmao rofl thx ty pls plz rn btw tbh idk omg".split())
+_FILLERS = frozenset("um umm uh uhm er erm hmm lol lmao rofl thx ty pls plz rn btw tbh idk omg yo".split())
+_CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "b4": "before", "thru": "through", "w/o": "without"}
 _COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands stand lies lie".split())
 _PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
 _WARNINGS = frozenset("careful caution warning attention heads".split())
@@ -441,7 +443,7 @@ class OfflineDecomposer:
             InputRejectedError: the text is refused before it is read (too long, mixed scripts, ...).
         """
         normalized = normalize_instruction(instruction)
-        words = [w for w in tokenize(normalized.text) if w not in _FILLERS]
+        words = [_CHAT_WORDS.get(w, w) for w in tokenize(normalized.text) if w not in _FILLERS]
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         words, read_as = self._read_words(words, vocabulary)
@@ -508,6 +510,8 @@ class OfflineDecomposer:
             start = subject_end
             while start > 0 and out[start - 1] not in _SENTENCE_END | {",", "so", "and", "then"}:
                 start -= 1
+            while start < subject_end and (out[start] in _CLAUSE_OPENERS or out[start] in ("after", "which")):
+                start += 1  # "..., after which the drawer is to be opened"
             clause = out[start:subject_end]
             # "it is requested that the plant be watered": the subject follows "that"
             subject_at = start + len(clause) - clause[::-1].index("that") if "that" in clause else start
@@ -905,8 +909,8 @@ class OfflineDecomposer:
                 if nouns:
                     break  # "the teacup its my favourite": a second determiner starts another phrase
                 continue
-            if word in _PERSONAL_PRONOUNS:
-                break  # "I want that you put ...": "that" is a conjunction, "you" no object
+            if word in _PERSONAL_PRONOUNS or word.isdigit():
+                break  # "I want that you put ...": "that" is a conjunction, "you" no object; "the abacus 12 cm ..."
             if not nouns and word in _RELATIONAL_ADJECTIVES:
                 continue  # "the neighbouring vase" is a vase
             if not nouns and not after_determiner and len(word) > 5 and word.endswith("ly"):
@@ -1526,6 +1530,7 @@ def _partitives(words: list[str]) -> list[str]:
     i = 1
     while i + 3 < len(out):
         picks = out[i] in _MODIFIERS and out[i - 1] in ("the", "a") and out[i + 1] == "of" and out[i + 2] == "the"
+        picks = picks and (i < 2 or out[i - 2] not in _BOUNDARY)  # not a place: "to the right of the pan"
         k = i + 3 + (out[i + 3] in _COUNTS)
         if picks and k < len(out) and out[k].isalpha() and out[k] not in _BOUNDARY:
             out[i + 1 : k + 1] = [singular(out[k])]
@@ -1533,10 +1538,10 @@ def _partitives(words: list[str]) -> list[str]:
     return out
 
 
-_REPAIRS: tuple[tuple[str, ...], ...] = (
+_REPAIRS: tuple[tuple[str, ...], ...] = tuple(sorted((
     ("no",), ("sorry",), ("i", "mean"), ("no", "wait"), ("wait",), ("oops",), ("rather",), ("correction",),
-    ("actually",), ("make", "that"), ("scratch", "that"), ("or", "rather"),
-)
+    ("actually",), ("make", "that"), ("scratch", "that"), ("or", "rather"), ("no", "sorry"), ("sorry", "i", "mean"),
+), key=len, reverse=True))  # the longest first: "no wait" before "no"
 
 
 def _self_repairs(words: list[str]) -> list[str]:
@@ -1563,6 +1568,8 @@ def _self_repairs(words: list[str]) -> list[str]:
         if k < len(out) and out[k] in DETERMINERS and out[first : first + 1] in [[d] for d in DETERMINERS] and (
             first < i - 2 and said_instead
         ):
+            if end < len(out) and out[end] == "," and all(w in _MODIFIERS for w in out[k + 1 : end]):
+                del out[end]  # "the yellow -- sorry, the orange -- block": the closing dash ends the repair only
             out[first:k] = []
             i = first + 1
             continue

@@ -91,7 +91,8 @@ _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
     ("is", "fine"), ("is", "ok"), ("is", "okay"), ("is", "alright"), ("is", "allowed"), ("are", "fine"),
     ("is", "no", "problem"), ("'s", "fine"), ("'s", "ok"), ("'s", "okay"), ("if", "you", "have", "to"),
     ("if", "you", "must"), ("if", "you", "need", "to"), ("if", "needed"), ("if", "necessary"), ("contact", "ok"),
-    ("contact", "okay"), ("contact", "fine"), ("contact", "allowed"),
+    ("contact", "okay"), ("contact", "fine"), ("contact", "allowed"), ("is", "permitted"), ("are", "permitted"),
+    ("is", "acceptable"), ("are", "acceptable"), ("is", "tolerated"), ("are", "allowed"),
 )  # fmt: skip
 _CLAUSE_END = frozenset(". ; : ! ? , but and then while".split())
 _CLAUSE_START = frozenset(", ; . : ! ? and then please also now just to you i kindly first next".split())
@@ -224,7 +225,7 @@ def object_mentions(
                 j += 1
             end = _noun_run(words, j, known, verbs)
             found = _mention(words, i, j, end, known, permitted)
-            if found is not None:
+            if found is not None and not _possessor(words, j, end, known, verbs):
                 mentions.append(found)
                 last_end = end
             i = max(end, j, i + 1)
@@ -406,6 +407,18 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     return Mention(" ".join(chunk), color, size, position, j + len(chunk) - 1, bool(set(range(j, end)) & permitted))
 
 
+def _possessor(words: Sequence[str], j: int, end: int, known, verbs: set[str]) -> bool:
+    """ "my grandfather's sextant", "the cat's bowl": the owner is no object to avoid, the thing owned is. Not a
+    known object word, nor the owner of a part ("the kettle's handle": the kettle is the object)."""
+    if end >= len(words) or not _possessive(words, end) or any(_known_at(words, k, known) for k in range(j, end)):
+        return False
+    k = end + 1
+    while k < len(words) and (words[k] in _DETERMINERS or words[k] in _MODIFIERS):
+        k += 1
+    owned_end = _noun_run(words, k, known, verbs)
+    return owned_end > k and not _not_object(words[owned_end - 1])
+
+
 def _not_object(word: str) -> bool:
     return word in NOT_OBJECTS or singular(word) in NOT_OBJECTS  # "at all times"
 
@@ -472,7 +485,7 @@ def is_obstacle(mention: Mention, plan: TaskPlan) -> bool:
         same = mention.name == obstacle.name or (
             (mention.head == obstacle.name.split()[-1] and words <= theirs) or (theirs <= words and len(theirs) > 0
                                                                                  and mention.head not in OBJECT_NOUNS)
-        ) or obstacle.name.startswith(f"{mention.name} ")  # "toy" read in "the toy car", the obstacle "toy car"
+        ) or f" {mention.name} " in f" {obstacle.name} "  # "toy" read in "the toy car", "towel" in "paper towel roll"
         if same and _compatible(mention, obstacle):
             return True
     return False

@@ -125,10 +125,11 @@ _PRONOUNS = {
 _LIST_SEPARATORS = frozenset({"and", "or", ",", "nor", "plus"})
 _CLAUSE_ENDS = frozenset({"then", "while", "but", "before", "after", "when", "so", "once", "until", "because"})
 _POLITE = frozenset(
-    "please could would can will you robot okay ok now i need want to like kindly go ahead hey hi hello um uh".split()
+    "please could would can will you robot okay ok now i need want to like kindly go ahead hey hi hello um uh yo"
+    .split()
 )
 # Hesitations and chat shorthand: no word of the task ("don't hit the lamp lol" names a lamp)
-_FILLERS = frozenset("um umm uh uhm er erm hmm lol lmao rofl thx ty pls plz rn btw tbh idk omg yo".split())
+_FILLERS = frozenset("um umm uh uhm er erm hmm lol lmao rofl thx ty pls plz rn btw tbh idk omg".split())
 _CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "b4": "before", "thru": "through", "w/o": "without"}
 _COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands stand lies lie".split())
 _PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
@@ -174,6 +175,7 @@ _SEQUENCE_OPENERS = frozenset({("after", "that"), ("after", "this"), ("after", "
 _PASSIVE_MODALS = frozenset(
     "is are to should must shall needs need has have ought will would can could not never also please".split()
 )
+_DISCOURSE = frozenset("actually anyway though however well instead rather sorry oops little one".split())
 _REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
 _STATE_ADVERBS = frozenset("all already still now just not almost nearly half wide".split())
 # Words between a subject and its predicate ("the mug and the cup are all in the way").
@@ -510,6 +512,16 @@ class OfflineDecomposer:
             start = subject_end
             while start > 0 and out[start - 1] not in _SENTENCE_END | {",", "so", "and", "then"}:
                 start -= 1
+            while start >= 2 and out[start - 1] in ("and", "or", ",") and out[start] in DETERMINERS:
+                previous = start - 1  # "both flasks and every test tube are to be avoided": the whole list
+                while previous > 0 and out[previous - 1] not in _SENTENCE_END | {",", "so", "and", "or", "then"}:
+                    previous -= 1
+                segment = out[previous : start - 1]
+                if out[previous] not in DETERMINERS or any(
+                    w in _COPULAS or w in _PASSIVE_MODALS or w == "be" or lemmas(w) & self._single_verbs for w in segment
+                ):
+                    break  # a clause of its own: "the drawer is to be opened and the microwave ..."
+                start = previous
             while start < subject_end and (out[start] in _CLAUSE_OPENERS or out[start] in ("after", "which")):
                 start += 1  # "..., after which the drawer is to be opened"
             clause = out[start:subject_end]
@@ -636,6 +648,8 @@ class OfflineDecomposer:
         for i, word in enumerate(words):
             if word not in ("one", "ones") or not i or words[i - 1] not in _MODIFIERS or words[i - 1] == "other":
                 continue
+            if i < 2 or words[i - 2] in (",", "!", "?", "."):
+                continue  # "mind the metronome, little one, ...": a name for the robot, not "the little metronome"
             earlier = [(noun, modifiers) for k, noun, modifiers in said if k < i - 1]
             if not earlier:
                 continue
@@ -723,7 +737,14 @@ class OfflineDecomposer:
         # ", which is next to it", ", it is right in front": a new clause about the object, not more objects
         if previous == "," and (word in ("which", "who") or words[i + 1 : i + 2] and words[i + 1] in _COPULAS):
             return True
-        # A lexicon verb right after "and" or a comma starts the next clause ("avoid the mug and pour ...").
+        if previous == "," and (word.endswith("ing") and lemmas(word) & _COLLISION_VERBS or _subject_of_verb(words, i)):
+            return True  # ", touching it is fine", ", the remote doesn't matter": a clause, not one more object
+        # A lexicon verb right after "and" or a comma (and "just", "now", "please") starts the next clause ("avoid
+        # the mug and pour ...", "don't touch the mug, just put ...").
+        k = i - 1
+        while k > 0 and words[k] in _CLAUSE_OPENERS | _POLITE and words[k] not in ("and", "to", "you"):
+            k -= 1
+        previous = words[k] if k >= 0 else ","
         return previous in ("and", ",") and bool(lemmas(word) & self._single_verbs)
 
     def _predicate_spans(self, words: list[str]) -> list[tuple[int, int, int, int, str]]:
@@ -836,6 +857,13 @@ class OfflineDecomposer:
             plural = True  # "there are a mug and a glass in the way"
         while start < end and words[start] in _LIST_SEPARATORS:
             start += 1
+        if start >= 2 and words[start - 1] == "'s" and end > start and words[end - 1] in NOT_OBJECTS:
+            owner = start - 1  # "the kettle's handle is hot": the kettle is the object, its handle a part of it
+            while owner > 0 and words[owner - 1] not in _SUBJECT_STOPS and not self._is_verb(words, owner - 1):
+                owner -= 1
+                if words[owner] in DETERMINERS:
+                    break
+            start = owner
         return start, end
 
     def _is_verb(self, words: list[str], i: int) -> bool:
@@ -872,7 +900,7 @@ class OfflineDecomposer:
             parse.declared.append((index, ref))
             parse.cue_of.setdefault(ref, cue)
             return
-        said = [w for w in chunk if w not in DETERMINERS and w not in _PARTICLES and w not in _POLITE]
+        said = [w for w in chunk if w not in DETERMINERS | _PARTICLES | _POLITE | _CLAUSE_OPENERS | _DISCOURSE]
         if said:
             parse.warnings.append(
                 f"'{cue} {' '.join(chunk)}' names no object the robot can see; no obstacle was added for it"
@@ -942,6 +970,10 @@ class OfflineDecomposer:
                 continue
             if _past_form(word):
                 continue  # "you stood the bottle up yesterday", "I spilled soil": what happened, not a request
+            wanted = any(w in ("need", "needs", "want", "wants", "get", "have", "like") for w in task[max(0, i - 6) : i])
+            if word.endswith("ing") and i and task[i - 1].isalpha() and not word_classes(task[i - 1]).isdisjoint(
+                {"NOUN"}) and task[i - 1] not in _POLITE and not lemmas(task[i - 1]) & self._single_verbs and not wanted:
+                continue  # "the wine bottle standing at the back" says which bottle; not "I need the bottle standing"
             # A lexicon word right after a determiner or adjective is a noun ("the water", "the base"); after a
             # copula it is a state ("the drawer is open"); "close to" / "close by" is a place, not the verb.
             previous = task[i - 1] if i else ","
@@ -1402,6 +1434,14 @@ def _check_outcome(instruction: str, skill: SkillSpec, tokens: Sequence[str], fi
     """Refuse a request for an outcome the skill does not produce: "slide the drawer shut" is no open_drawer, and
     "lay the bottle on its side" or "put the phone on the table" is no placement in the drawer or on the base (the
     skill's destination, not named, would be taken instead)."""
+    for i in range(len(tokens) - 2):
+        lying = tokens[i] in ("on", "onto") and tokens[i + 1] in ("its", "their", "the") and tokens[i + 2] == "side"
+        state = i and (tokens[i - 1] in _COPULAS or tokens[i - 1] in ("lying", "fell", "fallen") or _past_form(
+            tokens[i - 1]))  # "it's lying on its side", "it fell on its side": how it is now
+        if lying and not state and (i + 3 >= len(tokens) or tokens[i + 3] != "of"):  # not "on the side of the table"
+            raise InstructionNotUnderstoodError(
+                instruction, f"'{' '.join(tokens[i : i + 3])}' asks for an object to end up lying down, which "
+                             f"{skill.name} does not do; no skill fits")
     for noun in filled.values():
         result = tokens[noun.end] if noun.end < len(tokens) else ""
         opposite = {"shut": "open", "closed": "open", "open": "close"}.get(result)
@@ -1515,6 +1555,17 @@ _COUNTS = frozenset("two three four five several both".split())
 _RELATIVE_SUPERLATIVES = frozenset({("nearest",), ("closest",), ("farthest",), ("furthest",)})
 
 
+def _subject_of_verb(words: Sequence[str], i: int) -> bool:
+    """A determiner-led noun phrase at `i` followed by an auxiliary, a copula or a negation: a clause's subject."""
+    if words[i] not in DETERMINERS:
+        return False
+    k = i + 1
+    while k < len(words) and k - i < 5 and words[k].isalpha() and words[k] not in _BOUNDARY:
+        k += 1
+    after = words[k] if k < len(words) else "."
+    return after in _COPULAS or after in _AUXILIARIES or after.endswith("n't") or after in _NEGATORS
+
+
 def _nearest_to(task: Sequence[str], k: int) -> bool:
     """ "the bottle nearest (to) the microwave": a superlative of place before a determiner relates to a
     landmark."""
@@ -1564,7 +1615,15 @@ def _self_repairs(words: list[str]) -> list[str]:
         end = k + 1
         while end < len(out) and end - k < 5 and out[end].isalpha() and out[end] not in _BOUNDARY:
             end += 1
-        said_instead = end >= len(out) or out[end] not in _COPULAS | SUBJECT_VERBS  # not "wait, the cup is ..."
+        # not "wait, the cup is ...", "actually, the remote doesn't matter": a clause of its own
+        said_instead = end >= len(out) or (out[end] not in _COPULAS | SUBJECT_VERBS | _AUXILIARIES and not out[
+            end].endswith("n't") and out[end] not in _NEGATORS)
+        if k + 1 < len(out) and out[k] in _BOUNDARY and out[k + 1] in DETERMINERS and first >= 1 and (
+            out[first - 1] == out[k]
+        ):
+            out[first - 1 : k] = []  # "with the jug -- no wait, with the watering can"
+            i = first
+            continue
         if k < len(out) and out[k] in DETERMINERS and out[first : first + 1] in [[d] for d in DETERMINERS] and (
             first < i - 2 and said_instead
         ):

@@ -67,7 +67,7 @@ _NOUN_SLOTS = frozenset(
 )
 _CLAUSE_STARTS = frozenset(
     """, ; . : ! ? and then please also now just you to i 'd kindly go ahead could would can will robot first
-    next finally""".split()
+    next finally yo hey hi hello okay ok so""".split()
 )
 _TRIGGER_CLAUSE_END = frozenset(". ; : ! ? , and then but while".split())
 

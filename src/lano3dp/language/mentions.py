@@ -38,7 +38,8 @@ _POSITIONS = frozenset(
     centre center middle first second third last other""".split()
 )
 _MODIFIERS = COLOURS | SIZE_WORDS.keys() | _POSITIONS
-# Nothing to act on or avoid: surfaces under everything, parts of objects, contents, places, people, vagueness.
+# Nothing to act on or avoid: surfaces under everything, parts of objects, contents, places, people, vagueness,
+# times ("all week"), "ok", and the berth one gives ("give the kettle a wide berth").
 NOT_OBJECTS = frozenset(
     """table counter countertop worktop floor surface desk workspace shelf lid handle door knob cap cork rim edge
     spout neck stem side corner top bottom front back inside outside middle centre center left right area spot
@@ -53,7 +54,7 @@ UNITS = frozenset(
     """cm mm centimetre centimetres centimeter centimeters millimetre millimetres metre metres meter meters inch
     inches foot feet""".split()
 )
-NOT_OBJECTS = NOT_OBJECTS | UNITS  # times of day and "ok" are no things; a berth is given ("give the kettle a wide berth")
+NOT_OBJECTS = NOT_OBJECTS | UNITS
 # Words that end a noun phrase.
 _BOUNDARY = frozenset(
     """in into on onto over under from to with without of at by near next beside behind inside out up down off

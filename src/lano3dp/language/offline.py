@@ -92,7 +92,8 @@ _MODIFIERS = COLOURS | SIZE_WORDS.keys() | POSITION_WORDS.keys()
 _BOUNDARY = frozenset(
     """in into on onto over under from to with without of at by near next beside behind inside out up down
     off away back for using toward towards across through around while and or but then so that which who
-    please again too there here it them is are be was were can could would will should must shall might if when before 's
+    please again too there here it them is are be was were can could would will should must shall might if when
+    before 's
     after until as not don't do does very now just also still nearby close somewhere past 're 'm 've 'll 'd""".split()
 )
 # Nouns that never name an object to look at.
@@ -175,6 +176,7 @@ _SEQUENCE_OPENERS = frozenset({("after", "that"), ("after", "this"), ("after", "
 _PASSIVE_MODALS = frozenset(
     "is are to should must shall needs need has have ought will would can could not never also please".split()
 )
+_WANTING = frozenset("need needs want wants get have like".split())  # "I need the bottle standing up"
 _DISCOURSE = frozenset("actually anyway though however well instead rather sorry oops little one".split())
 _REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
 _STATE_ADVERBS = frozenset("all already still now just not almost nearly half wide".split())
@@ -474,8 +476,8 @@ class OfflineDecomposer:
             k = noun.index - 1
             while k >= 0 and (task[k] in DETERMINERS or task[k] in _MODIFIERS) and not _nearest_to(task, k):
                 k -= 1
-            noun.landmark = k >= 0 and (task[k] in _LOCATIVES | {"to"} and (task[k] != "to" or task[k - 1] in _LOCATIVES)
-                                        or _nearest_to(task, k))
+            locative = k >= 0 and task[k] in _LOCATIVES | {"to"} and (task[k] != "to" or task[k - 1] in _LOCATIVES)
+            noun.landmark = locative or (k >= 0 and _nearest_to(task, k))
             noun.destination = k >= 0 and task[k] in ("into", "onto")
             noun.source = k >= 0 and (task[k] in ("from", "off") or (task[k] == "of" and task[k - 1 : k] == ["out"]))
             existential = task[k] == "theres" if k >= 0 else False
@@ -518,7 +520,7 @@ class OfflineDecomposer:
                     previous -= 1
                 segment = out[previous : start - 1]
                 if out[previous] not in DETERMINERS or any(
-                    w in _COPULAS or w in _PASSIVE_MODALS or w == "be" or lemmas(w) & self._single_verbs for w in segment
+                    w in _COPULAS | _PASSIVE_MODALS | {"be"} or lemmas(w) & self._single_verbs for w in segment
                 ):
                     break  # a clause of its own: "the drawer is to be opened and the microwave ..."
                 start = previous
@@ -970,9 +972,10 @@ class OfflineDecomposer:
                 continue
             if _past_form(word):
                 continue  # "you stood the bottle up yesterday", "I spilled soil": what happened, not a request
-            wanted = any(w in ("need", "needs", "want", "wants", "get", "have", "like") for w in task[max(0, i - 6) : i])
-            if word.endswith("ing") and i and task[i - 1].isalpha() and not word_classes(task[i - 1]).isdisjoint(
-                {"NOUN"}) and task[i - 1] not in _POLITE and not lemmas(task[i - 1]) & self._single_verbs and not wanted:
+            wanted = any(w in _WANTING for w in task[max(0, i - 6) : i])
+            after_noun = i and task[i - 1].isalpha() and "NOUN" in word_classes(task[i - 1])
+            after_noun = after_noun and task[i - 1] not in _POLITE and not lemmas(task[i - 1]) & self._single_verbs
+            if word.endswith("ing") and after_noun and not wanted:
                 continue  # "the wine bottle standing at the back" says which bottle; not "I need the bottle standing"
             # A lexicon word right after a determiner or adjective is a noun ("the water", "the base"); after a
             # copula it is a state ("the drawer is open"); "close to" / "close by" is a place, not the verb.
@@ -1636,7 +1639,9 @@ def _self_repairs(words: list[str]) -> list[str]:
     return out
 
 
-_NO_CONTACT = frozenset("avoid avoiding no zero without minimal minimise minimize minimising minimizing prevent".split())
+_NO_CONTACT = frozenset(
+    "avoid avoiding no zero without minimal minimise minimize minimising minimizing prevent".split()
+)
 
 
 def _contact_cues(words: list[str]) -> list[str]:

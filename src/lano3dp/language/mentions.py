@@ -47,7 +47,7 @@ NOT_OBJECTS = frozenset(
     debris trash rubbish one ones thing things something anything everything nothing robot gripper arm hand
     yourself you me it them bit while moment second minute job task obstacle? way hour day night week weekend month
     year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact itself
-    themselves""".split()
+    themselves vicinity surroundings""".split()
 ) - {"obstacle?"}
 # Units of distance: "the grinder 8 cm to the right of the pan" names a grinder.
 UNITS = frozenset(
@@ -264,6 +264,9 @@ def word_classes(word: str) -> frozenset[str]:
     import lemminflect  # loads its lexicon on first use (~0.3 CPU-s), not when lano3dp is imported
 
     return frozenset(lemminflect.getAllLemmas(word))
+
+
+DESCRIBING = _ADJECTIVES  # adjectives that describe an object and never start its name ("hot", "open")
 
 
 def is_adjective(word: str) -> bool:

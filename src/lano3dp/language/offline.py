@@ -51,6 +51,7 @@ from lano3dp.language.exceptions import (
 )
 from lano3dp.language.grounding import ground_plan
 from lano3dp.language.mentions import (
+    DESCRIBING,
     NOT_OBJECTS,
     SUBJECT_VERBS,
     UNITS,
@@ -181,7 +182,9 @@ _DISCOURSE = frozenset("actually anyway though however well instead rather sorry
 _REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
 _STATE_ADVERBS = frozenset("all already still now just not almost nearly half wide".split())
 # Words between a subject and its predicate ("the mug and the cup are all in the way").
-_SUBJECT_SKIPS = frozenset("also still currently right now just all both each looks seems look seem".split())
+_SUBJECT_SKIPS = frozenset(
+    "also still currently right now just all both each looks seems look seem to remain remains stay stays".split()
+)  # "the green block is to remain untouched"
 _COMPOUND_MODIFIERS = frozenset("water table counter trash soup door lid coffee tea wine".split())
 _DETACHABLE = frozenset("lid cap cork cover case stopper".split())  # parts that come off: objects of their own
 _MAX_COMPOUND = 3  # words of an object's name: "small red coffee mug" has two, "watering can" two
@@ -243,6 +246,13 @@ def _past_form(word: str) -> bool:
         word != lemma and word in (*lemminflect.getInflection(lemma, "VBD"), *lemminflect.getInflection(lemma, "VBN"))
         for lemma in lemminflect.getAllLemmas(word).get("VERB", ())
     )
+
+
+def _same_participle(verb: str) -> bool:
+    """Whether the verb's past participle is its base form ("put", "set", "shut")."""
+    import lemminflect
+
+    return verb in lemminflect.getInflection(verb, "VBN")
 
 
 def _verb_lemmas(word: str) -> frozenset[str]:
@@ -498,7 +508,8 @@ class OfflineDecomposer:
         i = len(out) - 1
         while i > 1:
             i -= 1
-            if out[i] != "be":
+            ensured = out[i] in ("is", "are") and any(w in ("ensure", "sure") for w in out[max(0, i - 8) : i])
+            if out[i] != "be" and not ensured:  # "ensure that the phone is placed on its base" asks for it too
                 continue
             j = i + 1
             while j < len(out) and out[j].endswith("ly"):
@@ -506,8 +517,8 @@ class OfflineDecomposer:
             if j >= len(out):
                 continue
             task_verbs = (lemmas(out[j]) | _verb_lemmas(out[j])) & (self._single_verbs | {"avoid"}) - _COLLISION_VERBS
-            if not task_verbs or out[j] in self._single_verbs:
-                continue  # not a participle of a task verb ("be careful", "be open"); "is to be avoided" is a cue
+            if not task_verbs or (out[j] in self._single_verbs and not _same_participle(out[j])):
+                continue  # not a participle of a task verb ("be careful", "be open"); "be put", "be set" are
             subject_end = i
             while subject_end > 0 and out[subject_end - 1] in _PASSIVE_MODALS:
                 subject_end -= 1
@@ -955,6 +966,8 @@ class OfflineDecomposer:
                 nouns.append(word)
             elif word not in POSITION_WORDS:
                 vague = True  # "anything else": nothing after a vague head is its noun
+        while len(nouns) > 1 and nouns[0] in DESCRIBING and "NOUN" not in word_classes(nouns[0]):
+            nouns.pop(0)  # "the hot red pan": a pan, described; not "the rubber duck", "the remote control"
         nouns = nouns[-_MAX_COMPOUND:]  # "the a b c d e f": no object's name is a run of words
         if not nouns or len(" ".join(nouns)) > MAX_NAME_CHARS:
             return None
@@ -1532,6 +1545,7 @@ _POST_POSITIONS = {
     ("to", "your", "left"): "left", ("to", "your", "right"): "right", ("at", "the", "top"): "top",
     ("at", "the", "bottom"): "bottom", ("on", "top"): "top", ("at", "the", "back"): "back",
     ("at", "the", "front"): "front", ("in", "front"): "front", ("in", "the", "back"): "back",
+    ("at", "the", "rear"): "rear", ("in", "the", "rear"): "rear",
     ("in", "the", "front"): "front", ("on", "the", "bottom"): "bottom", ("in", "the", "middle"): "middle",
     ("in", "the", "centre"): "centre", ("in", "the", "center"): "center", ("nearest",): "nearest",
     ("closest",): "closest", ("farthest",): "farthest", ("furthest",): "furthest",

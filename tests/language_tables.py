@@ -71,7 +71,8 @@ def _words(ref: dict, slot=None) -> frozenset:
     if slot is not None and (name in slot.synonyms or singular(name) in slot.synonyms):
         name = slot.word  # the convention: a registered synonym is its slot's word, on both sides
     said = [ref.get("position"), ref.get("size"), ref.get("color"), name]
-    return frozenset(canonical_attribute(w) for part in said if part for w in str(part).split())
+    # a hyphen breaks words as a space does ("yo-yo" is read as "yo yo", as scene names are)
+    return frozenset(canonical_attribute(w) for part in said if part for w in str(part).replace("-", " ").split())
 
 
 def plan_key(plan: tuple[str, list[dict], list[dict]], registry) -> tuple:

@@ -464,7 +464,7 @@ def is_target(
         synonyms = _exact_synonyms(skill, k, registry)
         same = mention.name == target.name or (
             target.name in synonyms and (mention.name in synonyms or singular(mention.name) in synonyms)
-        )
+        ) or (" " in target.name and mention.name == target.name.split()[-1])  # "the can": the watering can
         if same and names_another(mention.name, target.name, (typed or {}).get(k)):
             continue
         if same and _compatible(mention, target) and mention.position in (None, target.position, "other"):

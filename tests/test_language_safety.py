@@ -298,6 +298,7 @@ NOT_REFUSED = [
                                                                      ["kitchen roll holder"])),
     ("yo stick the harmonica in the drawer", ("put_item_in_drawer", ["harmonica", "drawer"], [])),
     ("Please ensure that the bowl is poured into the pan", ("bowl_pour", ["bowl", "pan"], [])),
+    ("Place 1x block into the drawer, avoid the mugs x2", ("put_item_in_drawer", ["block", "drawer"], ["mug"])),
     ("The plant, you must water it with the can, avoiding the lamp",  # "the can" is the watering can
      ("water_plants", ["watering can", "plant"], ["lamp"])),
     ("The red block is to be put in the drawer; the blue block is to remain untouched",

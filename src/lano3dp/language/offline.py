@@ -132,6 +132,7 @@ _POLITE = frozenset(
 )
 # Hesitations and chat shorthand: no word of the task ("don't hit the lamp lol" names a lamp)
 _FILLERS = frozenset("um umm uh uhm er erm hmm lol lmao rofl thx ty pls plz rn btw tbh idk omg".split())
+_COUNT_MARK = re.compile(r"\b\d+\s?x\b|\bx\s?\d+\b", re.IGNORECASE)
 _CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "b4": "before", "thru": "through", "w/o": "without"}
 _COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands stand lies lie".split())
 _PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
@@ -457,7 +458,8 @@ class OfflineDecomposer:
             InputRejectedError: the text is refused before it is read (too long, mixed scripts, ...).
         """
         normalized = normalize_instruction(instruction)
-        words = [_CHAT_WORDS.get(w, w) for w in tokenize(normalized.text) if w not in _FILLERS]
+        text = _COUNT_MARK.sub(" ", normalized.text)  # "1x block", "mug x2": a count, not an "x block"
+        words = [_CHAT_WORDS.get(w, w) for w in tokenize(text) if w not in _FILLERS]
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         words, read_as = self._read_words(words, vocabulary)

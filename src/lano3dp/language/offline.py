@@ -103,6 +103,9 @@ _NON_OBJECTS = frozenset(
     water liquid soup stuff one ones area spot place workspace dirt dust crumb crumbs trash mess debris
     cork lid door what thing everything something nothing anything robot okay ok sure bit path route""".split()
 ) | UNITS
+# Said where an object could be, naming none: "obstacles: none", "be a dear", "..., won't you?"
+_TAGS = frozenset("none dear won't wouldn't isn't aren't".split())
+_NON_OBJECTS = _NON_OBJECTS | _TAGS
 _COLLISION_VERBS = frozenset(
     """touch hit bump knock disturb topple collide crash brush graze nudge move tip spill strike smash break
     jostle upset rattle scrape scratch damage push shove bang clip snag contact run go come""".split()
@@ -152,7 +155,8 @@ _NEGATORS = frozenset(
     mustn't mustnt needn't neednt refrain skip stop quit cease abstain forget""".split()
 )
 _ABSTAIN_VERBS = frozenset("refrain skip stop quit cease abstain forget".split())
-_NOT_AFTER = frozenset("do does please must should try better need rather".split())  # "I'd rather not open ..."
+# "I'd rather not open ...", "I'd prefer you did not open ..."
+_NOT_AFTER = frozenset("do does did please must should try better need rather would will could can shall".split())
 _NEGATION_FILLER = frozenset(
     "you ever even please try to go and just accidentally dare want need wish from on with bother bothering about mind"
     .split()
@@ -400,6 +404,7 @@ class OfflineDecomposer:
         """
         parse = self.parse(instruction, scene_objects)
         _refuse_question(instruction, parse)
+        _refuse_cancelled(instruction, parse.tokens)
         self._check_one_task(instruction, parse)
         skill = self._choose_skill(instruction, parse)
         taken_back = [
@@ -717,9 +722,10 @@ class OfflineDecomposer:
             if cue[-1] == "<det>":
                 start -= 1  # the determiner belongs to the noun phrase ("not the mug")
             while start < len(words) and (
-                words[start] in _PARTICLES or (words[start].endswith("ing") and _matches("<hit>", words[start]))
+                words[start] in _PARTICLES or words[start] in (":", "=")
+                or (words[start].endswith("ing") and _matches("<hit>", words[start]))
             ):
-                start += 1  # "avoid knocking over the mug": the mug, not a "knocking mug"
+                start += 1  # "avoid knocking over the mug": the mug, not a "knocking mug"; "avoid: mug"
             end = start
             contrast = cue in _CONTRASTS  # "the red block, not the mug, into the drawer": one noun phrase
             while end < len(words) and not self._clause_ends(words, end):
@@ -915,7 +921,10 @@ class OfflineDecomposer:
             parse.declared.append((index, ref))
             parse.cue_of.setdefault(ref, cue)
             return
-        said = [w for w in chunk if w not in DETERMINERS | _PARTICLES | _POLITE | _CLAUSE_OPENERS | _DISCOURSE]
+        said = [
+            w for w in chunk
+            if w not in DETERMINERS | _PARTICLES | _POLITE | _CLAUSE_OPENERS | _DISCOURSE | _TAGS and w.isalpha()
+        ]
         if said:
             parse.warnings.append(
                 f"'{cue} {' '.join(chunk)}' names no object the robot can see; no obstacle was added for it"
@@ -1427,7 +1436,28 @@ def _is_care(cue: str) -> bool:
 _QUESTION_WORDS = frozenset("is are was were do does did where what why when who which how has have am".split())
 _WH_WORDS = frozenset("where what why when who which how".split())
 _AUXILIARIES = frozenset("did do does is are was were has have had can could will would should".split())
+_REQUEST_FRAMES = frozenset("could would can will please mind may shall kindly".split())
 _YES_NO_AUXILIARIES = frozenset("is are was were does did has have".split())
+
+
+_CANCEL_WORDS = frozenset("cancel cancelled canceled cancelling aborted abort disregard scrap scrapped".split())
+_CANCEL_PHRASES: tuple[tuple[str, ...], ...] = (
+    ("do", "not", "execute"), ("don't", "execute"), ("not", "execute"), ("do", "not", "run", "it"),
+    ("don't", "run", "it"), ("don't", "run", "this"),
+    ("must", "not", "do"), ("mustn't", "do"), ("do", "not", "do"), ("don't", "do", "it"), ("don't", "do", "this"),
+    ("don't", "do", "that"), ("never", "do", "it"), ("never", "do", "this"), ("never", "do", "that"),
+    ("should", "not", "do"), ("shouldn't", "do"),
+)  # fmt: skip
+
+
+def _refuse_cancelled(instruction: str, tokens: Sequence[str]) -> None:
+    """ "cmd: water plant; status=cancelled", "put the phone on the base, this you must not do": the task is
+    called off as a whole."""
+    for i, word in enumerate(tokens):
+        phrase = next((p for p in _CANCEL_PHRASES if tuple(tokens[i : i + len(p)]) == p), None)
+        if word in _CANCEL_WORDS or phrase:
+            said = " ".join(phrase) if phrase else word
+            raise NegatedCommandError(instruction, f"'{said}' calls the task off; nothing is asked")
 
 
 def _refuse_question(instruction: str, parse: Parse) -> None:
@@ -1444,6 +1474,17 @@ def _refuse_question(instruction: str, parse: Parse) -> None:
         # possible to ...", "are you able to ...", which request
         asked = asked or tokens[start] in _YES_NO_AUXILIARIES and tokens[start + 1 : start + 2] in [
             [d] for d in DETERMINERS]
+        sentence = tokens[start : end + 1]
+        if end < len(tokens) and tokens[end] == "?":
+            # "if I asked you to open the bottle, how would you do it?": a wh-question after a clause
+            asked = asked or any(
+                w in _WH_WORDS - {"which", "who"} and sentence[k + 1 : k + 2] in [[a] for a in _AUXILIARIES]
+                for k, w in enumerate(sentence)
+            )
+            # "drawer open or closed?": no request frame, no verb that opens the sentence
+            request = any(w in _REQUEST_FRAMES for w in sentence)
+            opens = sentence[:1] and (lemmas(sentence[0]) & {v for _, v in parse.verb_at} or sentence[0] in _POLITE)
+            asked = asked or (not request and not opens and "or" in sentence)
         if asked:
             raise InstructionNotUnderstoodError(instruction, "it is a question, not a task; say what to do")
 

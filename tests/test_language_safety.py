@@ -227,7 +227,8 @@ REFUSALS = [
     (InstructionNotUnderstoodError, "Is the drawer open?", "it is a question, not a task"),
     (InstructionNotUnderstoodError, "Where did you put the phone?", "it is a question, not a task"),
     (UnknownVerbError, "Smash the bowl into the pan", "'smash' is not a verb any skill is asked for with"),
-    (UnknownVerbError, "The bowl into the pan, please", "it has no verb that asks for a task"),
+    (UnknownVerbError, "Blorp the snorf into the drawer", "'blorp' is not a verb any skill is asked for with"),
+    (UnknownVerbError, "Stack the red block on the blue block", "'stack' is not a verb any skill is asked for with"),
     (InstructionNotUnderstoodError, "Close the drawer", "no skill fits (verbs: close; objects: drawer)"),
     (InstructionNotUnderstoodError, "Pour the bowl into the drawer", "'drawer' has no place in bowl_pour (bowl, pan)"),
     # forgetting a task, "never mind" before a task verb, and a yes/no question without its "?"
@@ -264,6 +265,20 @@ REFUSALS = [
     (SeveralTasksError, "First pour the bowl into the pan and after that sweep the crumbs into the dustpan",
      "'pour': bowl_pour; 'sweep': sweep_to_dustpan"),
 ]  # fmt: skip
+
+
+SHORTHAND = [  # tables 8 and 9: a placement without a verb, read as "put" with a warning
+    ("The bowl into the pan, please", "bowl_pour(bowl, pan)"),
+    ("Sponge -> drawer. Avoid: lamp", "put_item_in_drawer(sponge, drawer); avoid lamp"),
+    ("Red block to drawer.", "put_item_in_drawer(red block, drawer)"),
+]
+
+
+@pytest.mark.parametrize(("instruction", "summary"), SHORTHAND)
+def test_a_placement_without_a_verb_is_read_as_put_and_says_so(decomposer, instruction, summary):
+    plan = decomposer.decompose(instruction)
+    assert plan.summary() == summary
+    assert any(w.startswith("read '") and "as 'put " in w for w in plan.warnings), plan.warnings
 
 
 @pytest.mark.parametrize(("error", "instruction", "reason"), REFUSALS, ids=[r[1][:40] for r in REFUSALS])

@@ -23,7 +23,8 @@ How an instruction is read (each step is a small function below; docs/language.m
    An obstacle that is one of the targets is a contradiction, refused ("put the bottle away without touching
    the bottle"), unless the cue asks for care ("pour the bowl, don't spill the bowl": a warning).
 5. Refuse two tasks (clause verbs with no skill in common) and an instruction whose only task is negated or has
-   no verb a skill is asked for with (never planned from its nouns alone).
+   no verb a skill is asked for with (never planned from its nouns alone; a verbless placement "block -> drawer"
+   is read as "put", with a warning).
 6. The safety invariant (`mentions.enforce_mentions`): every object named is a target or an obstacle.
 7. With a scene, ground it (`grounding.ground_plan`): a target is never replaced by another object.
 
@@ -464,6 +465,7 @@ class OfflineDecomposer:
         """
         normalized = normalize_instruction(instruction)
         text = _COUNT_MARK.sub(" ", normalized.text)  # "1x block", "mug x2": a count, not an "x block"
+        text = re.sub(r"\s*(?:->|=>|-->|→)\s*", " into ", text)  # "block -> drawer": shorthand for "into"
         words = [_CHAT_WORDS.get(w, w) for w in tokenize(text) if w not in _FILLERS]
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
@@ -471,6 +473,8 @@ class OfflineDecomposer:
         words = _partitives(_self_repairs(words))
         words = self._passive_requests(_polite_requests(_own_body(words)))
         words = _front_positions(_declared_placements(_contact_cues(words)))
+        words, shorthand = self._shorthand_placements(words, vocabulary)
+        read_as += shorthand
         mentions = object_mentions(words, [*self._vocabulary, *scene_kinds], self._single_verbs)
         words = self._resolve_one_anaphora(words, vocabulary)
         parse = Parse(tokens=list(words), warnings=[*normalized.warnings, *read_as], mentions=mentions)
@@ -505,6 +509,35 @@ class OfflineDecomposer:
             previous_noun = noun
         parse.obstacles = list(dict.fromkeys(parse.obstacles))
         return parse
+
+    def _shorthand_placements(self, words: list[str], vocabulary: Sequence[str]) -> tuple[list[str], list[str]]:
+        """ "Block into drawer.", "Carabiner to drawer" (no verb in the sentence): read as "put X into Y", with a
+        warning. Only where the place is a known object and nothing in the sentence is a verb."""
+        out, warnings, start = list(words), [], 0
+        places = {w for entry in vocabulary for w in entry.split()} | OBJECT_NOUNS
+        if any(lemmas(w) & self._single_verbs for w in out):
+            return out, warnings  # a verb somewhere ("Mixing bowl -> frying pan. Pour.") says what to do
+        while start < len(out):
+            end = next((k for k in range(start, len(out)) if out[k] in _SENTENCE_END), len(out))
+            sentence = out[start:end]
+            p = next((k for k, w in enumerate(sentence) if w in ("into", "onto", "to", "in", "on")), None)
+            if p is not None and 0 < p <= 4:
+                head = [w for w in sentence[:p] if w not in DETERMINERS and w not in _MODIFIERS]
+                rest = [w for w in sentence[p + 1 :] if w not in DETERMINERS and w not in _MODIFIERS]
+                # the first word names a thing, never a verb the rules lack ("smash the bowl into the pan",
+                # "stack the block on the block" stay unknown verbs)
+                said = [w for w in sentence[:p] if w not in _POLITE]
+                known_thing = bool(head) and singular(head[0]) in places
+                # an unknown word, a noun alone ("carabiner into drawer"); before "the" it is a verb ("blorp the ...")
+                thing = known_thing or (len(head) == 1 and word_classes(head[0]) <= {"NOUN"})
+                thing = thing and not any(w in DETERMINERS for w in said[1:])
+                if thing and all(w.isalpha() for w in head) and rest and singular(rest[0]) in places:
+                    said = " ".join(sentence)
+                    out.insert(start, "put")
+                    warnings.append(f"read '{said}' as 'put {said}'")
+                    end += 1
+            start = end + 1
+        return out, warnings
 
     def _passive_requests(self, words: list[str]) -> list[str]:
         """ "the bowl is to be poured into the pan", "the phone should be placed on its base", "it is requested that

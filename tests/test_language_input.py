@@ -124,7 +124,18 @@ TYPOS = [
     # the head of a compound stands where a noun stands
     ("put the water bottel in the drawer", "bottle_in_drawer(water bottle, drawer)",
      "read 'bottel' as 'bottle' (a typo?)"),
+    # shorthand: a noun after a verb or a preposition, a verb after a modal
+    ("Put blcok in drawer.", "put_item_in_drawer(block, drawer)", "read 'blcok' as 'block' (a typo?)"),
+    ("The drawer you must opne, please", "open_drawer(drawer)", "read 'opne' as 'open' (a typo?)"),
 ]
+
+
+@pytest.mark.parametrize("instruction", [
+    "Water the plant, Sam, wait, with the watering can",  # a name, not "slam"
+    "Close the microwave, its door was left ajar",  # a word of English, not "a jar"
+])
+def test_names_and_real_words_are_never_read_as_typos(decomposer, instruction):
+    assert not any("a typo?" in w for w in decomposer.decompose(instruction).warnings)
 
 
 @pytest.mark.parametrize(("instruction", "summary", "warning"), TYPOS)

@@ -469,7 +469,9 @@ class OfflineDecomposer:
         words = [_CHAT_WORDS.get(w, w) for w in tokenize(text) if w not in _FILLERS]
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
-        words, read_as = self._read_words(words, vocabulary)
+        # a capitalised word inside a sentence is a name ("Sam, wait"), never a typo of a verb or an object
+        names = {w.lower() for w in re.findall(r"(?<![.!?;:]\s)(?<!^)(?<=\s)[A-Z][a-z]+\b", text)}
+        words, read_as = self._read_words(words, vocabulary, names)
         words = _partitives(_self_repairs(words))
         words = self._passive_requests(_polite_requests(_own_body(words)))
         words = _front_positions(_declared_placements(_contact_cues(words)))
@@ -590,13 +592,15 @@ class OfflineDecomposer:
             i = start + 1  # what is left of the sentence before it
         return out
 
-    def _read_words(self, words: list[str], vocabulary: Sequence[str]) -> tuple[list[str], list[str]]:
+    def _read_words(
+        self, words: list[str], vocabulary: Sequence[str], names: frozenset[str] | set[str] = frozenset()
+    ) -> tuple[list[str], list[str]]:
         """Everyday verbs ("pop ... in") and typos of the rules' verbs and nouns, read as the words they mean;
-        one warning per word read otherwise (`spelling`)."""
+        one warning per word read otherwise (`spelling`). `names`: words written as names, left alone."""
         words, everyday = spelling.everyday_verbs(words, self._verbs)
         verbs = sorted(self._single_verbs | {v[0] for v in self._phrasal})
         nouns = sorted({w for entry in vocabulary for w in entry.split()} | OBJECT_NOUNS)
-        known = self._known_words | set(nouns)
+        known = self._known_words | set(nouns) | set(names)
 
         def is_known(word: str) -> bool:
             return word in known or bool(lemmas(word) & known) or singular(word) in known

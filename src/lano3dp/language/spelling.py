@@ -67,8 +67,18 @@ _NOUN_SLOTS = frozenset(
 )
 _CLAUSE_STARTS = frozenset(
     """, ; . : ! ? and then please also now just you to i 'd kindly go ahead could would can will robot first
-    next finally yo hey hi hello okay ok so""".split()
+    next finally yo hey hi hello okay ok so must should shall""".split()
 )
+_NOUN_AFTER = frozenset("in into on onto to with from".split())
+
+
+def _english_classes(word: str) -> frozenset[str]:
+    """The word classes lemminflect's English lexicon gives a word (empty for a typo or an unknown word)."""
+    import lemminflect  # loads on first use
+
+    return frozenset(lemminflect.getAllLemmas(word))
+
+
 _TRIGGER_CLAUSE_END = frozenset(". ; : ! ? , and then but while".split())
 
 
@@ -134,16 +144,21 @@ def correct_typos(
     """
     out = list(words)
     corrections: list[Correction] = []
+    verb_set = set(verbs)
     for i, word in enumerate(words):
         if word in COMMON_WORDS or not word.isalpha() or word in EVERYDAY_VERBS or is_known(word):
             continue
-        previous = words[i - 1] if i else ","
-        # a noun's place: after a determiner or an attribute, or after the first noun of a compound ("the wine botlte")
-        compound = i >= 2 and words[i - 2] in _NOUN_SLOTS and previous.isalpha()
-        if previous in _NOUN_SLOTS or compound:
-            choice = correct_word(word, nouns, substitution_from=6)
+        previous = out[i - 1] if i else ","  # as corrected: "opne drawr" -> "open", then "drawr" after a verb
+        # a noun's place: after a determiner or an attribute, after the first noun of a compound ("the wine
+        # botlte"), after a verb or a preposition in shorthand ("put blcok in drwer")
+        compound = i >= 2 and out[i - 2] in _NOUN_SLOTS and previous.isalpha()
+        english = _english_classes(word)
+        if previous in _NOUN_SLOTS or compound or previous in verb_set or previous in _NOUN_AFTER:
+            # a real word is no typo where a noun stands ("left ajar" is no "left jar")
+            choice = None if english else correct_word(word, nouns, substitution_from=6)
         elif previous in _CLAUSE_STARTS:
-            choice = correct_word(word, verbs, substitution_from=7)
+            # a real word that can be a verb is no typo there; "poor the bowl" is one
+            choice = None if "VERB" in english else correct_word(word, verbs, substitution_from=7)
         else:
             choice = None
         if choice is not None:

@@ -163,6 +163,9 @@ PERMITTED = [
     "Put the block in the drawer. mug: contact ok.",
     "Put the block in the drawer; contact with the mug is fine",
     "Put the block in the drawer. Contact with the mug is permitted.",
+    "Put the block in the drawer; you needn't worry about brushing the mug",
+    "Block -> drawer. Touching the mug OK.",
+    "If you have to nudge the mug to reach it, that's fine -- put the block in the drawer",
     "Put the block in the drawer, the mug won't break so don't worry about touching it",
 ]
 
@@ -327,6 +330,7 @@ NOT_REFUSED = [
     ("Put the block in the drawer and don't run into the lamp", ("put_item_in_drawer", ["block", "drawer"],
                                                                 ["lamp"])),
     ("Could you open the drawer, which is on the left?", ("open_drawer", ["drawer"], [])),
+    ("Open the drawer but take care around the vase; it was my aunt's", ("open_drawer", ["drawer"], ["vase"])),
     ("The plant, you must water it with the can, avoiding the lamp",  # "the can" is the watering can
      ("water_plants", ["watering can", "plant"], ["lamp"])),
     ("The red block is to be put in the drawer; the blue block is to remain untouched",

@@ -80,6 +80,7 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("may", "touch"), ("can", "touch"), ("may", "bump"), ("can", "bump"), ("may", "push"), ("can", "push"),
     ("may", "move"), ("can", "move"), ("ok", "to"), ("okay", "to"), ("fine", "to"), ("alright", "to"),
     ("free", "to"), ("don't", "worry", "about"), ("dont", "worry", "about"), ("do", "not", "worry", "about"),
+    ("needn't", "worry", "about"), ("need", "not", "worry", "about"), ("no", "need", "to", "worry", "about"),
     ("no", "need", "to", "avoid"), ("ignore",), ("doesn't", "matter"), ("does", "not", "matter"),
     ("allowed", "to", "touch"), ("may", "knock"), ("can", "knock"), ("may", "brush"),
     ("can", "brush"), ("may", "nudge"), ("can", "nudge"), ("fine", "if"), ("ok", "if"), ("okay", "if"),
@@ -158,6 +159,10 @@ def _known_at(words: Sequence[str], i: int, known: dict[str, list[tuple[str, ...
     return 0
 
 
+_ALLOWED_WORDS = frozenset("ok okay fine allowed acceptable permitted alright".split())
+_CONTACT_VERBS = frozenset("touch bump brush nudg knock hitt push mov graz contact".split())  # stems before "-ing"
+
+
 def _permitted_spans(words: Sequence[str]) -> set[int]:
     permitted: set[int] = set()
     for i in range(len(words)):
@@ -170,9 +175,18 @@ def _permitted_spans(words: Sequence[str]) -> set[int]:
         for phrase in _PERMITTED_AFTER:
             if tuple(words[i : i + len(phrase)]) == phrase:
                 k = i - 1 - (words[i - 1 : i] == [":"])  # "towel: contact ok"
+                if words[k : k + 1] in (["that"], ["this"], ["it"]) and words[k - 1 : k] == [","]:
+                    k -= 2  # "if you have to nudge the board, that's fine": the clause before it
                 while k >= 0 and words[k] not in _CLAUSE_END:
                     permitted.add(k)
                     k -= 1
+        if words[i] in _ALLOWED_WORDS and (i + 1 == len(words) or words[i + 1] in _CLAUSE_END):
+            k = i - 1  # "touching the box OK.": a clause about contact that ends in a permission
+            while k >= 0 and words[k] not in _CLAUSE_END:
+                k -= 1
+            clause = range(k + 1, i)
+            if any(words[m].endswith("ing") and words[m][:-3] in _CONTACT_VERBS for m in clause):
+                permitted.update(clause)
     return permitted
 
 
@@ -360,6 +374,7 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             and (word not in verbs or end == j)
             and not word.endswith("ly")
             and not (end > j and (word.endswith(("ing", "ed")) or word in SUBJECT_VERBS))
+            and not (end > j and word_classes(word) and "NOUN" not in word_classes(word))  # "the guests arrive"
             and end - j < 3
         ):
             end += 1
@@ -416,6 +431,8 @@ def _possessor(words: Sequence[str], j: int, end: int, known, verbs: set[str]) -
     known object word, nor the owner of a part ("the kettle's handle": the kettle is the object)."""
     if end >= len(words) or not _possessive(words, end) or any(_known_at(words, k, known) for k in range(j, end)):
         return False
+    if end + 1 >= len(words) or words[end + 1] in _CLAUSE_END:
+        return True  # "the vase ... it was my mother's": the owner of what was named before
     k = end + 1
     while k < len(words) and (words[k] in _DETERMINERS or words[k] in _MODIFIERS):
         k += 1

@@ -252,6 +252,8 @@ REFUSALS = [
     (InstructionNotUnderstoodError, "Bottle upright or lying down?", "it is a question, not a task"),
     (InstructionNotUnderstoodError, "If I wanted the drawer open, what would you do?", "it is a question"),
     (ContradictionError, "task: open bottle; avoid: bottle", "'bottle' is the object open_wine_bottle acts on"),
+    (ContradictionError, "The drawer open, but the drawer never touching", "'drawer' is the object open_drawer"),
+    (ContradictionError, "Close the microwave without going anywhere near the microwave", "'microwave' is the object"),
     (SeveralTasksError, "The drawer is to be opened and the microwave is to be closed", "'close': close_microwave"),
     (SeveralTasksError, "The bowl is to be poured into the pan, after which the drawer is to be opened",
      "'pour': bowl_pour; 'open'"),
@@ -331,6 +333,10 @@ NOT_REFUSED = [
                                                                 ["lamp"])),
     ("Could you open the drawer, which is on the left?", ("open_drawer", ["drawer"], [])),
     ("Open the drawer but take care around the vase; it was my aunt's", ("open_drawer", ["drawer"], ["vase"])),
+    ("If there are two bottles, open the green bottle and keep clear of the other one",
+     ("open_wine_bottle", ["green bottle"], ["other bottle"])),
+    ("Open the drawer, the vase do not touch", ("open_drawer", ["drawer"], ["vase"])),  # the object before the cue
+    ("So the kitchen stays tidy, open the drawer", ("open_drawer", ["drawer"], [])),
     ("The plant, you must water it with the can, avoiding the lamp",  # "the can" is the watering can
      ("water_plants", ["watering can", "plant"], ["lamp"])),
     ("The red block is to be put in the drawer; the blue block is to remain untouched",

@@ -47,7 +47,7 @@ NOT_OBJECTS = frozenset(
     debris trash rubbish one ones thing things something anything everything nothing robot gripper arm hand
     yourself you me it them bit while moment second minute job task obstacle? way hour day night week weekend month
     year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact itself
-    themselves vicinity surroundings none dear""".split()
+    themselves vicinity surroundings none dear kitchen room house home lab office""".split()
 ) - {"obstacle?"}
 # Units of distance: "the grinder 8 cm to the right of the pan" names a grinder.
 UNITS = frozenset(

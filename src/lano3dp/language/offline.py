@@ -759,7 +759,7 @@ class OfflineDecomposer:
             if cue[-1] == "<det>":
                 start -= 1  # the determiner belongs to the noun phrase ("not the mug")
             while start < len(words) and (
-                words[start] in _PARTICLES or words[start] in (":", "=")
+                words[start] in _PARTICLES or words[start] in (":", "=", "anywhere", "somewhere")
                 or (words[start].endswith("ing") and _matches("<hit>", words[start]))
             ):
                 start += 1  # "avoid knocking over the mug": the mug, not a "knocking mug"; "avoid: mug"
@@ -769,6 +769,17 @@ class OfflineDecomposer:
                 if contrast and end > start and (words[end] == "," or words[end] in _DESTINATIONS | {"to"}):
                     break
                 end += 1
+            if "<hit>" in cue and not any(w.isalpha() for w in words[start:end]):
+                # "the cup do not touch", "the bottle never touching": the object said before the cue
+                before = i
+                while before > 0 and words[before - 1] not in _SENTENCE_END | {",", "but", "and"}:
+                    before -= 1
+                if before < i and any(w in DETERMINERS for w in words[before:i]):
+                    spans.append((before, i, " ".join(cue_words)))
+                    for j in range(i, start):
+                        words[j] = ","
+                    i = max(end, start)
+                    continue
             spans.append((start, end, " ".join(cue_words)))
             for j in range(i, start):
                 words[j] = ","  # the cue words are not task words
@@ -1317,7 +1328,9 @@ class OfflineDecomposer:
     def _assign(skill: SkillSpec, nouns: list[_Noun]) -> tuple[dict[int, tuple[_Noun, bool]], list[_Noun]]:
         """Slot index -> (noun, filled as wildcard); and the nouns left over."""
         assigned: dict[int, tuple[_Noun, bool]] = {}
-        free = sorted(nouns, key=lambda n: not n.in_task)  # "there are two bowls. pour the red one ..."
+        # "there are two bowls. pour the red one ...", "if there are two drawers, open the top drawer": what is
+        # said to be there fills a slot last
+        free = sorted(nouns, key=lambda n: (not n.in_task, n.declared))
         for k, slot in enumerate(skill.slots):
             # A landmark ("past the block", "next to the drawer") fills a slot only when nothing else can: for the
             # item slot, any other noun said as the object can ("move the teapot past the block").
@@ -1361,7 +1374,7 @@ class OfflineDecomposer:
         for reference in parse.references:
             assigned, free = self._assign(skill, parse.nouns)
             targets = [noun for noun, _ in assigned.values()]
-            before = [n for n in free if n.index < reference.index]
+            before = sorted((n for n in free if n.index < reference.index), key=lambda n: n.index)
             others = [n for n in before if not any(_same_thing(skill, n, t) for t in targets)]
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)

@@ -336,6 +336,9 @@ NOT_REFUSED = [
     ("If there are two bottles, open the green bottle and keep clear of the other one",
      ("open_wine_bottle", ["green bottle"], ["other bottle"])),
     ("Open the drawer, the vase do not touch", ("open_drawer", ["drawer"], ["vase"])),  # the object before the cue
+    # a target said without an attribute never covers an object said with one ("the phone of grey colour")
+    ("The phone, put it on the base, but the phone of grey colour, this one do not touch",
+     ("phone_on_base", ["phone", "base"], ["grey phone"])),
     ("So the kitchen stays tidy, open the drawer", ("open_drawer", ["drawer"], [])),
     ("The plant, you must water it with the can, avoiding the lamp",  # "the can" is the watering can
      ("water_plants", ["watering can", "plant"], ["lamp"])),

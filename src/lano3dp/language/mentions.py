@@ -453,9 +453,16 @@ def _contents_after_of(words: Sequence[str], i: int) -> bool:
 
 
 def _compatible(mention: Mention, ref: ObjectRef) -> bool:
-    """No attribute differs; an obstacle said without one ("that mug") covers the mention with it ("the white
-    mug"), as grounding avoids every object its phrase names."""
-    return all(getattr(ref, a) is None or getattr(mention, a) in (None, getattr(ref, a)) for a in ("color", "size"))
+    """No attribute the mention has differs from the object's (a target "phone" is not the mention "grey
+    phone")."""
+    return all(getattr(mention, a) in (None, getattr(ref, a)) for a in ("color", "size"))
+
+
+def _covered(mention: Mention, obstacle: ObjectRef) -> bool:
+    """An obstacle said without an attribute ("that mug") covers the mention with it ("the white mug"): grounding
+    avoids every object its phrase names. Never used for targets: one object is acted on, not all its kind."""
+    return all(getattr(obstacle, a) is None or getattr(mention, a) in (None, getattr(obstacle, a))
+               for a in ("color", "size"))
 
 
 def _exact_synonyms(skill: SkillSpec | None, k: int, registry=None) -> set[str]:
@@ -507,7 +514,7 @@ def is_obstacle(mention: Mention, plan: TaskPlan) -> bool:
             (mention.head == obstacle.name.split()[-1] and words <= theirs) or (theirs <= words and len(theirs) > 0
                                                                                  and mention.head not in OBJECT_NOUNS)
         ) or f" {mention.name} " in f" {obstacle.name} "  # "toy" read in "the toy car", "towel" in "paper towel roll"
-        if same and _compatible(mention, obstacle):
+        if same and _covered(mention, obstacle):
             return True
     return False
 

@@ -472,7 +472,7 @@ class OfflineDecomposer:
         # a capitalised word inside a sentence is a name ("Sam, wait"), never a typo of a verb or an object
         names = {w.lower() for w in re.findall(r"(?<![.!?;:]\s)(?<!^)(?<=\s)[A-Z][a-z]+\b", text)}
         words, read_as = self._read_words(words, vocabulary, names)
-        words = _partitives(_self_repairs(words))
+        words = _colour_phrases(_partitives(_self_repairs(words)))
         words = self._passive_requests(_polite_requests(_own_body(words)))
         words = _front_positions(_declared_placements(_contact_cues(words)))
         words, shorthand = self._shorthand_placements(words, vocabulary)
@@ -1656,6 +1656,21 @@ def _polite_requests(words: list[str]) -> list[str]:
             out[i - 1 : i + 1] = [",", "please"]  # "let's open the bottle" asks for it
         if out[i - 1] == "come" and out[i] == "on" and (i < 2 or out[i - 2] in _TASK_BREAKS):
             out[i - 1 : i + 1] = [",", "please"]  # "come on, ...": encouragement, not a verb of moving
+    return out
+
+
+def _colour_phrases(words: list[str]) -> list[str]:
+    """ "the phone of grey colour", "a cup in red colour" -> "the grey phone", "a red cup"."""
+    out = list(words)
+    i = 1
+    while i + 2 < len(out):
+        k = i + 1 + (out[i + 1] in ("a", "the"))
+        if out[i] in ("of", "in") and k + 1 < len(out) and out[k] in COLOURS and out[k + 1] in ("colour", "color"):
+            noun = i - 1
+            if out[noun].isalpha() and out[noun] not in _BOUNDARY:
+                out[noun : k + 2] = [out[k], out[noun]]
+                continue
+        i += 1
     return out
 
 

@@ -411,6 +411,13 @@ ROLES = [
     "the {o} sits on the left",
     "watch out for the {o}",
     "don't knock over the {o}",
+    # classes the blind tables 7-9 found
+    "avoid: the {o}",
+    "the {o} do not touch",
+    "no contact with the {o}",
+    "the {o} must not be touched",
+    "the {o} stays put",
+    "my aunt's {o} is next to it",
 ]
 TASKS = [
     ("open the drawer", {"drawer"}),

@@ -254,6 +254,8 @@ REFUSALS = [
     (ContradictionError, "task: open bottle; avoid: bottle", "'bottle' is the object open_wine_bottle acts on"),
     (ContradictionError, "The drawer open, but the drawer never touching", "'drawer' is the object open_drawer"),
     (ContradictionError, "Close the microwave without going anywhere near the microwave", "'microwave' is the object"),
+    (ContradictionError, "Pour the bowl into the pan without laying a finger on the bowl", "'bowl' is the object"),
+    (InstructionNotUnderstoodError, "I left the drawer open by mistake, can you close it?", "no skill fits"),
     (SeveralTasksError, "The drawer is to be opened and the microwave is to be closed", "'close': close_microwave"),
     (SeveralTasksError, "The bowl is to be poured into the pan, after which the drawer is to be opened",
      "'pour': bowl_pour; 'open'"),
@@ -340,6 +342,12 @@ NOT_REFUSED = [
     ("The phone, put it on the base, but the phone of grey colour, this one do not touch",
      ("phone_on_base", ["phone", "base"], ["grey phone"])),
     ("So the kitchen stays tidy, open the drawer", ("open_drawer", ["drawer"], [])),
+    # found by the blind table 10: an adverb after an obstacle, a permission "allowed to push", "that's no problem"
+    ("Close the microwave. Watch the kettle though.", ("close_microwave", ["microwave"], ["kettle"])),
+    ("Open the drawer. You're allowed to push the box aside, just avoid the lamp.",
+     ("open_drawer", ["drawer"], ["lamp"])),
+    ("Open the drawer. If you bump the cushion that's no problem.", ("open_drawer", ["drawer"], [])),
+    ("Get the bottle open for me", ("open_wine_bottle", ["bottle"], [])),
     ("The plant, you must water it with the can, avoiding the lamp",  # "the can" is the watering can
      ("water_plants", ["watering can", "plant"], ["lamp"])),
     ("The red block is to be put in the drawer; the blue block is to remain untouched",

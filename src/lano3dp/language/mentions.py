@@ -82,7 +82,7 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("free", "to"), ("don't", "worry", "about"), ("dont", "worry", "about"), ("do", "not", "worry", "about"),
     ("needn't", "worry", "about"), ("need", "not", "worry", "about"), ("no", "need", "to", "worry", "about"),
     ("no", "need", "to", "avoid"), ("ignore",), ("doesn't", "matter"), ("does", "not", "matter"),
-    ("allowed", "to", "touch"), ("may", "knock"), ("can", "knock"), ("may", "brush"),
+    ("allowed", "to"), ("may", "knock"), ("can", "knock"), ("may", "brush"),
     ("can", "brush"), ("may", "nudge"), ("can", "nudge"), ("fine", "if"), ("ok", "if"), ("okay", "if"),
     ("alright", "if"), ("matter", "if"),
 )  # fmt: skip
@@ -91,7 +91,8 @@ _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
     ("can", "be", "touched"), ("can", "be", "moved"), ("can", "be", "pushed"), ("may", "be", "touched"),
     ("may", "be", "moved"), ("may", "be", "pushed"), ("doesn't", "matter"), ("does", "not", "matter"),
     ("is", "fine"), ("is", "ok"), ("is", "okay"), ("is", "alright"), ("is", "allowed"), ("are", "fine"),
-    ("is", "no", "problem"), ("'s", "fine"), ("'s", "ok"), ("'s", "okay"), ("if", "you", "have", "to"),
+    ("is", "no", "problem"), ("'s", "no", "problem"), ("'s", "fine"), ("'s", "ok"), ("'s", "okay"),
+    ("if", "you", "have", "to"),
     ("if", "you", "must"), ("if", "you", "need", "to"), ("if", "needed"), ("if", "necessary"), ("contact", "ok"),
     ("contact", "okay"), ("contact", "fine"), ("contact", "allowed"), ("is", "permitted"), ("are", "permitted"),
     ("is", "acceptable"), ("are", "acceptable"), ("is", "tolerated"), ("are", "allowed"),

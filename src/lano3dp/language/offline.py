@@ -183,6 +183,8 @@ _SEQUENCE_OPENERS = frozenset({("after", "that"), ("after", "this"), ("after", "
 _PASSIVE_MODALS = frozenset(
     "is are to should must shall needs need has have ought will would can could not never also please".split()
 )
+_STATE_WORDS = frozenset("open shut closed upright".split())
+_KEEPING = frozenset("leave left leaving leaves keep kept keeping keeps found find".split())
 _WANTING = frozenset("need needs want wants get have like".split())  # "I need the bottle standing up"
 _DISCOURSE = frozenset("actually anyway though however well instead rather sorry oops little one".split())
 _REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
@@ -465,6 +467,8 @@ class OfflineDecomposer:
         """
         normalized = normalize_instruction(instruction)
         text = _COUNT_MARK.sub(" ", normalized.text)  # "1x block", "mug x2": a count, not an "x block"
+        text = re.sub(r"\b(lay|laying|lays|put|putting) a finger on\b", lambda m: "touching" if m.group(1).endswith(
+            "ing") else "touch", text, flags=re.IGNORECASE)  # an idiom of touching
         text = re.sub(r"\s*(?:->|=>|-->|→)\s*", " into ", text)  # "block -> drawer": shorthand for "into"
         words = [_CHAT_WORDS.get(w, w) for w in tokenize(text) if w not in _FILLERS]
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
@@ -1000,6 +1004,8 @@ class OfflineDecomposer:
             if nouns and word in _DETACHABLE:
                 nouns.append(word)  # "the pan lid": a lid is an object of its own, not the pan
                 continue
+            if nouns and word.isalpha() and word_classes(word) == {"ADV"}:
+                break  # "mind the lamp though": an adverb ends the noun phrase
             # A function word straight after "the" is a noun after all ("the can").
             if word in _BOUNDARY and not after_determiner:
                 if nouns or vague:
@@ -1044,6 +1050,10 @@ class OfflineDecomposer:
                 continue
             if _past_form(word):
                 continue  # "you stood the bottle up yesterday", "I spilled soil": what happened, not a request
+            if word in _STATE_WORDS and i >= 2 and any(w in _KEEPING for w in task[max(0, i - 5) : i - 1]) and (
+                task[i - 1] not in _PERSONAL_PRONOUNS
+            ):
+                continue  # "I left the drawer open", "keep the bottle upright": how it is, not a request
             wanted = any(w in _WANTING for w in task[max(0, i - 6) : i])
             after_noun = i and task[i - 1].isalpha() and "NOUN" in word_classes(task[i - 1])
             after_noun = after_noun and task[i - 1] not in _POLITE and not lemmas(task[i - 1]) & self._single_verbs

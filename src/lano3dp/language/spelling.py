@@ -1,7 +1,8 @@
 """Typos and everyday verbs: words the rules do not know, read as words they do, always with a warning.
 
 A word is corrected only when all of these hold, so that a real word is never turned into another:
-- it is not a word the rules or the object list know (`known`), nor a common English word listed here;
+- it is not a word the rules or the object list know (`known`), nor a common English word listed here, nor
+  (where a noun stands) any word of lemminflect's English lexicon, nor (where a verb stands) one it has as a verb;
 - it stands where a verb or a noun stands (first word of a clause: a verb; after "the", "a", a colour, or
   after the first word of a compound: a noun), and is corrected only to a word of that kind;
 - one candidate is strictly closest, at Damerau-Levenshtein distance 1 (a swap of two neighbouring letters
@@ -23,6 +24,8 @@ from typing import NamedTuple
 
 from rapidfuzz import process
 from rapidfuzz.distance import DamerauLevenshtein
+
+from lano3dp.language.mentions import word_classes
 
 # Common English words a typo check must leave alone although they are one letter from a skill's word
 # ("place" / "plate", "will" / "fill", "test" / "rest", "full" / "pull").
@@ -70,15 +73,6 @@ _CLAUSE_STARTS = frozenset(
     next finally yo hey hi hello okay ok so must should shall""".split()
 )
 _NOUN_AFTER = frozenset("in into on onto to with from".split())
-
-
-def _english_classes(word: str) -> frozenset[str]:
-    """The word classes lemminflect's English lexicon gives a word (empty for a typo or an unknown word)."""
-    import lemminflect  # loads on first use
-
-    return frozenset(lemminflect.getAllLemmas(word))
-
-
 _TRIGGER_CLAUSE_END = frozenset(". ; : ! ? , and then but while".split())
 
 
@@ -152,7 +146,7 @@ def correct_typos(
         # a noun's place: after a determiner or an attribute, after the first noun of a compound ("the wine
         # botlte"), after a verb or a preposition in shorthand ("put blcok in drwer")
         compound = i >= 2 and out[i - 2] in _NOUN_SLOTS and previous.isalpha()
-        english = _english_classes(word)
+        english = word_classes(word)  # empty for a typo or a word English lacks
         if previous in _NOUN_SLOTS or compound or previous in verb_set or previous in _NOUN_AFTER:
             # a real word is no typo where a noun stands ("left ajar" is no "left jar")
             choice = None if english else correct_word(word, nouns, substitution_from=6)

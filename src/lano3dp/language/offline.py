@@ -137,7 +137,7 @@ _POLITE = frozenset(
 # Hesitations and chat shorthand: no word of the task ("don't hit the lamp lol" names a lamp)
 _FILLERS = frozenset("um umm uh uhm er erm hmm lol lmao rofl thx ty pls plz rn btw tbh idk omg".split())
 _COUNT_MARK = re.compile(r"\b\d+\s?x\b|\bx\s?\d+\b", re.IGNORECASE)
-_CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "b4": "before", "thru": "through", "w/o": "without"}
+_CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "thru": "through"}
 _COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands stand lies lie".split())
 _PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
 _WARNINGS = frozenset("careful caution warning attention heads".split())
@@ -517,8 +517,8 @@ class OfflineDecomposer:
         return parse
 
     def _shorthand_placements(self, words: list[str], vocabulary: Sequence[str]) -> tuple[list[str], list[str]]:
-        """ "Block into drawer.", "Carabiner to drawer" (no verb in the sentence): read as "put X into Y", with a
-        warning. Only where the place is a known object and nothing in the sentence is a verb."""
+        """ "Block into drawer.", "Carabiner to drawer": read as "put X into Y", with a warning. Only where no word
+        of the instruction is a lexicon verb and the place is a known object."""
         out, warnings, start = list(words), [], 0
         places = {w for entry in vocabulary for w in entry.split()} | OBJECT_NOUNS
         if any(lemmas(w) & self._single_verbs for w in out):
@@ -532,11 +532,11 @@ class OfflineDecomposer:
                 rest = [w for w in sentence[p + 1 :] if w not in DETERMINERS and w not in _MODIFIERS]
                 # the first word names a thing, never a verb the rules lack ("smash the bowl into the pan",
                 # "stack the block on the block" stay unknown verbs)
-                said = [w for w in sentence[:p] if w not in _POLITE]
+                before = [w for w in sentence[:p] if w not in _POLITE]
                 known_thing = bool(head) and singular(head[0]) in places
                 # an unknown word, a noun alone ("carabiner into drawer"); before "the" it is a verb ("blorp the ...")
                 thing = known_thing or (len(head) == 1 and word_classes(head[0]) <= {"NOUN"})
-                thing = thing and not any(w in DETERMINERS for w in said[1:])
+                thing = thing and not any(w in DETERMINERS for w in before[1:])
                 if thing and all(w.isalpha() for w in head) and rest and singular(rest[0]) in places:
                     said = " ".join(sentence)
                     out.insert(start, "put")
@@ -1500,7 +1500,7 @@ _REQUEST_FRAMES = frozenset("could would can will please mind may shall kindly".
 _YES_NO_AUXILIARIES = frozenset("is are was were does did has have".split())
 
 
-_CANCEL_WORDS = frozenset("cancel cancelled canceled cancelling aborted abort disregard scrap scrapped".split())
+_CANCEL_WORDS = frozenset("cancel cancelled canceled cancelling aborted abort".split())  # not "scrap paper"
 _CANCEL_PHRASES: tuple[tuple[str, ...], ...] = (
     ("do", "not", "execute"), ("don't", "execute"), ("not", "execute"), ("do", "not", "run", "it"),
     ("don't", "run", "it"), ("don't", "run", "this"),

@@ -55,6 +55,15 @@ def test_wilson_interval():
     assert wilson_interval(0, 0) == (None, None)
 
 
+def test_success_plot_draws_a_perfect_score(tmp_path):
+    # 100 of 100 pooled: the Wilson bound computes a hair under 1.0, which matplotlib's error bars refuse
+    from lano3dp.report import plot_success_intervals
+
+    path = tmp_path / "success.png"
+    plot_success_intervals(path, {("task", "method"): [(50, 50), (50, 50)]}, title="perfect")
+    assert path.stat().st_size > 0
+
+
 def test_markdown_table():
     table = markdown_table(["a", "b"], [[1, None], [0.12345, "x|y"]])
     assert table.splitlines() == ["| a | b |", "|---|---|", "| 1 | – |", "| 0.123 | x\\|y |"]

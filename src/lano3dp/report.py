@@ -162,7 +162,9 @@ def plot_success_intervals(path: str | Path, cells: Mapping[tuple[str, str], Seq
             low, high = wilson_interval(successes, trials)
             ax.bar(position, rate, width, color=color, alpha=0.85, label=None if labelled else name)
             labelled = True
-            ax.errorbar(position, rate, yerr=[[rate - low], [high - rate]], color="black", capsize=3, lw=1)
+            # clamped: at 100/100 the Wilson bound computes a hair under the rate, which matplotlib refuses
+            ax.errorbar(position, rate, yerr=[[max(0.0, rate - low)], [max(0.0, high - rate)]], color="black",
+                        capsize=3, lw=1)
             if len(seeds) > 1:
                 ax.plot([position] * len(seeds), [c / e for c, e in seeds if e], ".", color="black", ms=4)
             ax.annotate(f"{rate:.0%}", (position, high), textcoords="offset points", xytext=(0, 2), ha="center",

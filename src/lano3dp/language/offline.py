@@ -252,7 +252,7 @@ def _past_form(word: str) -> bool:
 
     return any(
         word != lemma and word in (*lemminflect.getInflection(lemma, "VBD"), *lemminflect.getInflection(lemma, "VBN"))
-        for lemma in lemminflect.getAllLemmas(word).get("VERB", ())
+        for lemma in _verb_lemmas(word)
     )
 
 

@@ -134,6 +134,20 @@ DECLARED = [
     ("The astrolabe stays put; open the drawer", ("open_drawer", ["drawer"], ["astrolabe"])),
     ("Give the kettle a wide berth and close the microwave", ("close_microwave", ["microwave"], ["kettle"])),
     ("Open the drawer, keep off the toy trains", ("open_drawer", ["drawer"], ["toy train"])),  # once, not "toy" too
+    # found by the blind table 11: irregular plurals from the lexicon, objects after a quantity and "of", a degree
+    # before a state, a clause whose subject is "it", abstract nouns of idioms, adjectives that name a thing
+    ("Close the microwave, mind the loaves", ("close_microwave", ["microwave"], ["loaf"])),
+    ("Open the drawer, there are batteries and knives on the left", ("open_drawer", ["drawer"],
+                                                                     ["battery", "knife"])),
+    ("Open the drawer without hitting a pair of pliers or a bunch of widgets",
+     ("open_drawer", ["drawer"], ["pliers", "widget"])),
+    ("Loads of spanners are near the pan; pour the bowl into the pan", ("bowl_pour", ["bowl", "pan"], ["spanner"])),
+    ("The microwave door is a tad wobbly, close the microwave", ("close_microwave", ["microwave"], [])),
+    ("Open the drawer, it feels a little loose", ("open_drawer", ["drawer"], [])),
+    ("Close the microwave and avoid the toaster, it was just used", ("close_microwave", ["microwave"],
+                                                                      ["toaster"])),
+    ("Put the phone on the base, that lamp cost me a fortune", ("phone_on_base", ["phone", "base"], ["lamp"])),
+    ("Open the drawer, the iron is beside it", ("open_drawer", ["drawer"], ["iron"])),
 ]  # fmt: skip
 
 
@@ -167,6 +181,7 @@ PERMITTED = [
     "Block -> drawer. Touching the mug OK.",
     "If you have to nudge the mug to reach it, that's fine -- put the block in the drawer",
     "Put the block in the drawer, the mug won't break so don't worry about touching it",
+    "Put the block in the drawer, no problem if you graze the mug",  # found by the blind table 11
 ]
 
 

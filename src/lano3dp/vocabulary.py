@@ -57,14 +57,28 @@ _PLURAL_ONLY = frozenset(
 
 @functools.lru_cache(maxsize=8192)
 def singular(word: str) -> str:
-    """Crude English singular for object nouns ("bowls" -> "bowl", "boxes" -> "box", "glasses" -> "glass")."""
+    """English singular of an object noun ("bowls" -> "bowl", "knives" -> "knife", "batteries" -> "battery").
+
+    Irregular plurals come from lemminflect's lexicon (a suffix rule makes "knive" and "batterie"); a word the
+    lexicon lacks ("pipettes") loses its plural ending by rule. Among a word's noun lemmas an object noun wins
+    ("glasses" -> "glass", "bases" -> "base")."""
     if word in _PLURAL_ONLY:
         return word
+    by_rule = word
     if len(word) > 4 and word.endswith(("sses", "xes", "ches", "shes")):
-        return word[:-2]
-    if len(word) > 3 and word.endswith("s") and not word.endswith(("ss", "us", "is")):
-        return word[:-1]
-    return word
+        by_rule = word[:-2]
+    elif len(word) > 3 and word.endswith("s") and not word.endswith(("ss", "us", "is")):
+        by_rule = word[:-1]
+    lemmas = _noun_lemmas(word) if word.isalpha() else ()
+    if not lemmas:
+        return by_rule
+    return next((w for w in lemmas if w in OBJECT_NOUNS), by_rule if by_rule in lemmas else lemmas[0])
+
+
+def _noun_lemmas(word: str) -> tuple[str, ...]:
+    import lemminflect  # loads its lexicon on first use (~0.3 CPU-s), not when lano3dp is imported
+
+    return tuple(lemminflect.getAllLemmas(word).get("NOUN", ()))
 
 
 def canonical_attribute(word: str) -> str:

@@ -39,7 +39,8 @@ _POSITIONS = frozenset(
 )
 _MODIFIERS = COLOURS | SIZE_WORDS.keys() | _POSITIONS
 # Nothing to act on or avoid: surfaces under everything, parts of objects, contents, places, people, vagueness,
-# times ("all week"), "ok", and the berth one gives ("give the kettle a wide berth").
+# times ("all week"), "ok", the berth one gives ("give the kettle a wide berth"), and abstract nouns of everyday
+# idioms ("it cost a fortune", "have a look", "take care").
 NOT_OBJECTS = frozenset(
     """table counter countertop worktop floor surface desk workspace shelf lid handle door knob cap cork rim edge
     spout neck stem side corner top bottom front back inside outside middle centre center left right area spot
@@ -47,7 +48,8 @@ NOT_OBJECTS = frozenset(
     debris trash rubbish one ones thing things something anything everything nothing robot gripper arm hand
     yourself you me it them bit while moment second minute job task obstacle? way hour day night week weekend month
     year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact itself
-    themselves vicinity surroundings none dear kitchen room house home lab office""".split()
+    themselves vicinity surroundings none dear kitchen room house home lab office fortune favour favor look try
+    go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal""".split()
 ) - {"obstacle?"}
 # Units of distance: "the grinder 8 cm to the right of the pan" names a grinder.
 UNITS = frozenset(
@@ -84,7 +86,8 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("no", "need", "to", "avoid"), ("ignore",), ("doesn't", "matter"), ("does", "not", "matter"),
     ("allowed", "to"), ("may", "knock"), ("can", "knock"), ("may", "brush"),
     ("can", "brush"), ("may", "nudge"), ("can", "nudge"), ("fine", "if"), ("ok", "if"), ("okay", "if"),
-    ("alright", "if"), ("matter", "if"),
+    ("alright", "if"), ("matter", "if"), ("no", "problem", "if"), ("not", "a", "problem", "if"),
+    ("no", "worries", "if"),
 )  # fmt: skip
 # Said after an object, permitting contact with it ("the mug can be moved", "the mug may be touched").
 _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
@@ -271,6 +274,11 @@ _ADJECTIVES = frozenset(
 )
 
 
+# Adjectives that, said alone after an article, name a thing ("the iron", "a rubber", "a little light").
+_ADJECTIVES_ALSO_THINGS = frozenset("iron light rubber".split())
+_ARTICLES = frozenset("a an the this that my your our their his her".split())
+
+
 @functools.cache
 def word_classes(word: str) -> frozenset[str]:
     """The word classes an English lexicon gives `word` ("NOUN", "ADJ", "VERB", ...; empty if it lacks it).
@@ -387,6 +395,8 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
 def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Mention | None:
     """The mention of words[j:end] with the modifiers of words[i:j], or None if it names no object."""
     chunk = list(words[j:end])
+    if _degree_before_state(words, i, j, end, known):
+        return None
     known_ends = [k + _known_at(chunk, k, known) for k in range(len(chunk)) if _known_at(chunk, k, known)]
     if known_ends:
         chunk = chunk[: max(known_ends)]  # "the mug holder" -> mug: the known noun is the head
@@ -402,6 +412,9 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     # a lone adjective names nothing ("they're both hot"; "a good robot" once "robot" is dropped)
     material = len(chunk) == 1 and (chunk[0] in _ADJECTIVES or is_adjective(chunk[0])) and not _known_at(
         chunk, 0, known)  # not "the glass"
+    # "the iron is next to it", "a little light near the drawer": a thing, said with its article
+    material = material and not (chunk == words[j:end] and chunk[0] in _ADJECTIVES_ALSO_THINGS and any(
+        w in _ARTICLES for w in words[i:j]))
     if not chunk or (len(chunk) == 1 and _not_object(chunk[0])) or material:
         return None  # "the left side", "they're both hot": no object
     if _contents_after_of(words, j):
@@ -425,6 +438,27 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     if len(" ".join(chunk)) > MAX_NAME_CHARS:
         return None  # no object's name is that long; a plan could not carry it either
     return Mention(" ".join(chunk), color, size, position, j + len(chunk) - 1, bool(set(range(j, end)) & permitted))
+
+
+_DEGREE_NOUNS = frozenset("bit tad touch".split())
+_COPULAS = frozenset("is are was were 's be been feels feel seems seem looks look gets get".split())
+
+
+def _degree_before_state(words: Sequence[str], i: int, j: int, end: int, known) -> bool:
+    """ "the drawer is a bit stiff", "it's a tad heavy", "the lid feels a little loose": a degree before an
+    adjective says how something is, and names no object. Not "there's a little light" (an object there)."""
+    chunk = words[j:end]
+    if chunk[:1] and chunk[0] in _DEGREE_NOUNS and words[j - 1 : j] == ["a"]:
+        state = chunk[1:] or words[end : end + 1]  # "a tad wobbly": the adverb-like adjective ended the run
+        end += len(chunk) == 1
+    elif tuple(words[max(i, j - 2) : j]) == ("a", "little") and words[j - 3 : j - 2] and (
+        words[j - 3] in _COPULAS and words[j - 4 : j - 3] not in (["there"], ["here"])
+    ):
+        state = chunk
+    else:
+        return False
+    return len(state) == 1 and not _known_at(state, 0, known) and "ADJ" in word_classes(state[0]) and (
+        end == len(words) or words[end] in _CLAUSE_END or words[end] in _BOUNDARY)
 
 
 def _possessor(words: Sequence[str], j: int, end: int, known, verbs: set[str]) -> bool:

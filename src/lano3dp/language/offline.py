@@ -476,7 +476,7 @@ class OfflineDecomposer:
         # a capitalised word inside a sentence is a name ("Sam, wait"), never a typo of a verb or an object
         names = {w.lower() for w in re.findall(r"(?<![.!?;:]\s)(?<!^)(?<=\s)[A-Z][a-z]+\b", text)}
         words, read_as = self._read_words(words, vocabulary, names)
-        words = _colour_phrases(_partitives(_self_repairs(words)))
+        words = _colour_phrases(_quantities(_partitives(_self_repairs(words))))
         words = self._passive_requests(_polite_requests(_own_body(words)))
         words = _front_positions(_declared_placements(_contact_cues(words)))
         words, shorthand = self._shorthand_placements(words, vocabulary)
@@ -964,6 +964,8 @@ class OfflineDecomposer:
         bare = tuple(w for w in content if w not in ("very", "just", "also", "either", "any"))
         while len(bare) > 1 and bare[-1] in ("over", "off", "down", "up", "away", "around"):
             bare = bare[:-1]  # "don't knock it over"
+        if len(bare) > 1 and bare[0] in ("it", "they") and bare[1] not in ("and", "or"):
+            bare = bare[:1]  # "the kettle, it just boiled": a clause about what was named, whose subject it is
         if bare in _PRONOUNS:
             parse.references.append(_Reference(index, _PRONOUNS[bare], f"{cue} {' '.join(bare)}".strip()))
             return
@@ -1721,6 +1723,29 @@ def _partitives(words: list[str]) -> list[str]:
         if picks and k < len(out) and out[k].isalpha() and out[k] not in _BOUNDARY:
             out[i + 1 : k + 1] = [singular(out[k])]
         i += 1
+    return out
+
+
+# Nouns that count or gather what follows "of": "a couple of pipettes" names pipettes, not a couple.
+_QUANTITY_NOUNS = frozenset(
+    """couple pair lot lots loads load bunch bunches pile piles stack stacks heap heaps handful number dozen dozens
+    plenty row rows set group collection bundle cluster""".split()
+)
+
+
+def _quantities(words: list[str]) -> list[str]:
+    """ "a couple of pipettes", "lots of beakers", "a pair of scissors" -> "some pipettes", ...: the quantity is
+    a determiner of the objects after "of", so they are read (and avoided) as the objects named."""
+    out: list[str] = []
+    for k, word in enumerate(words):
+        if word == "of" and out and out[-1] == "some" and k >= 1 and words[k - 1] in _QUANTITY_NOUNS:
+            continue
+        if word in _QUANTITY_NOUNS and words[k + 1 : k + 2] == ["of"]:
+            if out and out[-1] in ("a", "the", "an"):
+                out.pop()
+            out.append("some")
+            continue
+        out.append(word)
     return out
 
 

@@ -274,6 +274,10 @@ NONSENSE = [
     ("Close the microwave with the bowl", "'bowl' has no place in close_microwave (microwave)"),
     ("Sweep the bowl into the pan", "'sweep' is not how bowl_pour is asked for"),
     ("Pour the pan into the bowl", "it asks to move things into the bowl, but bowl_pour carries the bowl to the pan"),
+    # found by the blind table 12: what goes in or on the carried object is no object to carry
+    ("Put the stopper back in the bottle", "it asks to move things in or on the bottle, but bottle_in_drawer carries "
+                                           "the bottle to the drawer"),
+    ("Put the cap on the bottle", "it asks to move things in or on the bottle"),
     ("Put the microwave in the drawer", "'microwave' cannot be carried by put_item_in_drawer"),
     ("Take the block out of the drawer", "'take' is not a verb any skill is asked for with"),
     ("Take the phone off the base", "it asks to take something out of or off the base"),

@@ -148,6 +148,14 @@ DECLARED = [
                                                                       ["toaster"])),
     ("Put the phone on the base, that lamp cost me a fortune", ("phone_on_base", ["phone", "base"], ["lamp"])),
     ("Open the drawer, the iron is beside it", ("open_drawer", ["drawer"], ["iron"])),
+    # found by the blind table 12: nouns joined to a noun phrase without their own determiner, every member of a
+    # "there are" list, a position word said of the noun after it, the owner named after a possessive
+    ("Open the drawer; the glasses and salt shakers must stay put", ("open_drawer", ["drawer"],
+                                                                     ["glass", "salt shaker"])),
+    ("Close the microwave, there are mugs, tea towels and toy trucks around, avoid them",
+     ("close_microwave", ["microwave"], ["mug", "tea towel", "toy truck"])),
+    ("Put the block in the middle drawer", ("put_item_in_drawer", ["block", "middle drawer"], [])),
+    ("The lamp is my uncle's, so be careful with it and open the drawer", ("open_drawer", ["drawer"], ["lamp"])),
 ]  # fmt: skip
 
 
@@ -182,6 +190,7 @@ PERMITTED = [
     "If you have to nudge the mug to reach it, that's fine -- put the block in the drawer",
     "Put the block in the drawer, the mug won't break so don't worry about touching it",
     "Put the block in the drawer, no problem if you graze the mug",  # found by the blind table 11
+    "Put the block in the drawer, I don't mind if you bump the mug",  # found by the blind table 12
 ]
 
 

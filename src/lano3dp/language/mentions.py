@@ -87,7 +87,7 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("allowed", "to"), ("may", "knock"), ("can", "knock"), ("may", "brush"),
     ("can", "brush"), ("may", "nudge"), ("can", "nudge"), ("fine", "if"), ("ok", "if"), ("okay", "if"),
     ("alright", "if"), ("matter", "if"), ("no", "problem", "if"), ("not", "a", "problem", "if"),
-    ("no", "worries", "if"),
+    ("no", "worries", "if"), ("don't", "mind"), ("dont", "mind"), ("do", "not", "mind"),
 )  # fmt: skip
 # Said after an object, permitting contact with it ("the mug can be moved", "the mug may be touched").
 _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
@@ -238,9 +238,9 @@ def object_mentions(
         if word in _SWEEP_VERBS and (words[i - 1] if i else ",") in _CLAUSE_START:
             i = _after_swept(words, i + 1, known, verbs)  # "sweep the sand ...": what is swept is no object
             continue
-        if word in _DETERMINERS or word in _MODIFIERS or _possessive(words, i):
+        if word in _DETERMINERS or word in _MODIFIERS or possessive(words, i):
             j = i
-            while j < n and (words[j] in _DETERMINERS or words[j] in _MODIFIERS or _possessive(words, j)):
+            while j < n and (words[j] in _DETERMINERS or words[j] in _MODIFIERS or possessive(words, j)):
                 j += 1
             end = _noun_run(words, j, known, verbs)
             found = _mention(words, i, j, end, known, permitted)
@@ -251,6 +251,14 @@ def object_mentions(
             continue
         length = _known_at(words, i, known)
         previous = words[i - 1] if i else ","
+        if i and last_end == i - 1 and _coordinated_noun(words, i, length, verbs):
+            end = _noun_run(words, i, known, verbs)  # "the batteries and tape measures": one determiner for both
+            found = _mention(words, i, i, end, known, permitted)
+            if found is not None:
+                mentions.append(found)
+                last_end = end
+            i = max(end, i + 1)
+            continue
         ambiguous = word in _AMBIGUOUS_BARE and not _bare_plural_noun(words, i) and not _bare_noun_said(words, i)
         if length and not ambiguous and word not in NOT_OBJECTS and not (word in verbs and previous in _CLAUSE_START):
             end = _noun_run(words, i, known, verbs)
@@ -262,6 +270,51 @@ def object_mentions(
             continue
         i += 1
     return _permit_referents(words, mentions, permitted)
+
+
+# What may follow a plural noun heading a compound with a known object word ("toy cars all over the place"); not
+# what follows a verb after its subject ("the bottle stops rolling", "the drawer ends up open").
+_AFTER_PLURAL_HEAD = frozenset(
+    ". , ; : ! ? and or all around everywhere nearby are must have on in by near next beside away from to inside"
+    .split()
+)
+_PARTICLES_AFTER_VERBS = frozenset("out up down over off away around for about".split())
+
+
+def _plural_noun(word: str) -> bool:
+    return singular(word) != word and "NOUN" in word_classes(singular(word))
+
+
+def _coordinated_noun(words: Sequence[str], i: int, known_length: int, verbs: set[str]) -> bool:
+    """ "the batteries and tape measures", "dolls, teddy bears and toy cars": a noun joined to the noun phrase just
+    before it, without a determiner of its own. Not a verb of a second clause ("and mind the lamp", "and watch
+    the cup": an object follows it)."""
+    word = words[i]
+    following = words[i + 1] if i + 1 < len(words) else "."
+    if not word.isalpha() or word in verbs or _not_object(word) or word in _BOUNDARY or word in _DETERMINERS:
+        return False
+    if words[i - 1] not in ("and", "or", ","):
+        return False
+    if words[i - 1] == ",":  # "dolls, teddy bears and toy cars": a comma joins nouns only in a list going on
+        end = i + 1
+        while end < len(words) and words[end] not in _CLAUSE_END:
+            end += 1
+        if end - i > 3 or words[end : end + 1] not in ([","], ["and"], ["or"]):
+            return False
+    if following in _DETERMINERS or following in _MODIFIERS or following in _PARTICLES_AFTER_VERBS or (
+        following in ("it", "them", "him", "her", "you", "me", "us")
+    ):
+        return False  # "and watch out for the lamp", "and mind the mug": a verb with its object or particle
+    classes = word_classes(word)
+    if known_length or _plural_noun(word):
+        return True  # a known object word, or a plural noun
+    if following.isalpha() and following not in _BOUNDARY and (following in OBJECT_NOUNS or _plural_noun(following)):
+        return True  # "salt shakers": a compound with an object noun after it
+    if "VERB" in classes and "NOUN" not in classes:
+        return False
+    # a noun, or a word the lexicon lacks before a noun ("teddy bears")
+    return "NOUN" in classes and "VERB" not in classes or not classes and following.isalpha() and bool(
+        word_classes(following) & {"NOUN"})
 
 
 _PRONOUNS_BEFORE_IS = frozenset("that it there here what who he she this where which".split())
@@ -353,7 +406,7 @@ def _bare_noun_said(words: Sequence[str], i: int) -> bool:
     return previous in _CLAUSE_END and following in _WHERE_AFTER_BARE
 
 
-def _possessive(words: Sequence[str], i: int) -> bool:
+def possessive(words: Sequence[str], i: int) -> bool:
     """ "'s" after a noun ("the bowl's contents"); after "that", "it", "there" it is "is"."""
     has = words[i + 1 : i + 2] in (["been"], ["got"], ["gotten"])  # "the microwave's been left open"
     following = words[i + 1] if i + 1 < len(words) else "."
@@ -399,7 +452,12 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
         return None
     known_ends = [k + _known_at(chunk, k, known) for k in range(len(chunk)) if _known_at(chunk, k, known)]
     if known_ends:
-        chunk = chunk[: max(known_ends)]  # "the mug holder" -> mug: the known noun is the head
+        rest = chunk[max(known_ends) :]
+        after = words[end] if end < len(words) else "."
+        plural_head = len(rest) == 1 and singular(rest[0]) != rest[0] and "NOUN" in word_classes(singular(rest[0]))
+        plural_head = plural_head and after in _AFTER_PLURAL_HEAD  # not "the drawer ends up open"
+        if not plural_head:  # "the toy cars", "the tape measures": a plural noun after a known one is the head
+            chunk = chunk[: max(known_ends)]  # "the mug holder" -> mug: the known noun is the head
     while chunk and _not_object(chunk[-1]) and not _known_at(chunk, len(chunk) - 1, known):
         if len(chunk) > 1 and chunk[-1] in _DETACHABLE:
             break  # "the pan lid": a lid comes off, so it is an object of its own
@@ -464,7 +522,7 @@ def _degree_before_state(words: Sequence[str], i: int, j: int, end: int, known) 
 def _possessor(words: Sequence[str], j: int, end: int, known, verbs: set[str]) -> bool:
     """ "my grandfather's sextant", "the cat's bowl": the owner is no object to avoid, the thing owned is. Not a
     known object word, nor the owner of a part ("the kettle's handle": the kettle is the object)."""
-    if end >= len(words) or not _possessive(words, end) or any(_known_at(words, k, known) for k in range(j, end)):
+    if end >= len(words) or not possessive(words, end) or any(_known_at(words, k, known) for k in range(j, end)):
         return False
     if end + 1 >= len(words) or words[end + 1] in _CLAUSE_END:
         return True  # "the vase ... it was my mother's": the owner of what was named before

@@ -61,6 +61,7 @@ from lano3dp.language.mentions import (
     is_adjective,
     names_another,
     object_mentions,
+    possessive,
     word_classes,
 )
 from lano3dp.language.normalize import normalize_instruction
@@ -116,6 +117,8 @@ _SURFACES = frozenset("table counter countertop worktop floor ground side desk s
 _PLACEMENT_MODALS = frozenset("needs need has have to should must can will ought".split())
 _OWN_BODY = frozenset("your the its my gripper grippers hand hands arm arms fingers yourself robot".split())
 _PHRASE_ENDS = frozenset(", and or from to near next beside away inside".split())
+# What may follow a plural noun that heads a compound with a known object word ("toy cars all over the place").
+_AFTER_PLURAL_HEAD = _PHRASE_ENDS | frozenset("all around everywhere nearby are must have on in by".split())
 # Adjectives that place an object relative to others, never part of its name.
 _RELATIONAL_ADJECTIVES = frozenset("neighbouring neighboring adjacent nearby".split())
 _PERSONAL_PRONOUNS = frozenset("i you we he she they me him us myself yourself ourselves itself themselves".split())
@@ -512,6 +515,8 @@ class OfflineDecomposer:
             noun.declared = existential or (noun.end < len(task) and task[noun.end] in _COPULAS)
             if k >= 0 and task[k] in ("and", "or") and previous_noun is not None and previous_noun.landmark:
                 noun.landmark = True  # "past the mug and the jar": both are landmarks
+            if not noun.declared and _in_existential_list(task, noun.index, verb_positions):
+                noun.declared = True  # "there's dolls, teddy bears and toy cars": all of them said to be there
             previous_noun = noun
         parse.obstacles = list(dict.fromkeys(parse.obstacles))
         return parse
@@ -755,6 +760,8 @@ class OfflineDecomposer:
         spans, i = [], 0
         while i < len(words):
             cue = next((c for c in _CUES if self._cue_at(words, i, c)), None)
+            if cue is not None and cue[0] == "mind" and i and words[i - 1] in ("don't", "dont", "not"):
+                cue = None  # "I don't mind if you brush the boxes": a permission (`mentions`), not a caution
             if cue is None:
                 i += 1
                 continue
@@ -1188,6 +1195,11 @@ class OfflineDecomposer:
         head = task[end]
         if head in NOT_OBJECTS or head in _NOT_HEADS or head.endswith("ly"):
             return False  # "the drawer handle", "the plant today", "the toy quickly"
+        after = task[end + 1] if end + 1 < len(task) else "."
+        if head.endswith("s") and head not in SUBJECT_VERBS and singular(head) != head and (
+            "NOUN" in word_classes(singular(head)) and after in _AFTER_PLURAL_HEAD
+        ):
+            return True  # "toy cars all over the place", "the tape measures have to stay": a plural noun head
         if head.endswith(("s", "ed", "ing")) and head not in OBJECT_NOUNS:
             return False  # "the drawer ends up open", "the block stays": a verb after its subject
         classes = word_classes(head) if head.isalpha() else frozenset()
@@ -1322,13 +1334,18 @@ class OfflineDecomposer:
                     f"it asks to take something out of or off the {noun.name}, but {skill.name} puts the "
                     f"{skill.slots[carried].word} there",
                 )
-        if carried is not None and carried in assigned and assigned[carried][0].destination:
+        held = assigned[carried][0] if carried is not None and carried in assigned else None
+        # "put the cork back in the wine bottle": the object said after "in" / "on" is where something goes
+        placed_in = held is not None and _placed_in_or_on(parse.tokens, held.index)
+        if held is not None and (held.destination or placed_in):
             others = [n for k, (n, _) in assigned.items() if k != carried]
-            if others and not any(n.destination for n in others):
+            if not any(n.destination for n in others) and (others or placed_in):
+                where = ", ".join(n.name for n in others) or skill.slots[-1].word
+                into = "into" if held.destination else "in or on"
                 raise InstructionNotUnderstoodError(
                     instruction,
-                    f"it asks to move things into the {assigned[carried][0].name}, but {skill.name} carries the "
-                    f"{skill.slots[carried].word} to the {', '.join(n.name for n in others)}",
+                    f"it asks to move things {into} the {held.name}, but {skill.name} carries the "
+                    f"{skill.slots[carried].word} to the {where}",
                 )
 
     def _matcher_skills(self, verb_phrase: str) -> set[str]:
@@ -1387,12 +1404,27 @@ class OfflineDecomposer:
             assigned, free = self._assign(skill, parse.nouns)
             targets = [noun for noun, _ in assigned.values()]
             before = sorted((n for n in free if n.index < reference.index), key=lambda n: n.index)
+            # "the vase was my grandmother's, so be careful with it": the owner is no object to avoid
+            before = [n for n in before if not (
+                not n.known and parse.tokens[n.end : n.end + 1] == ["'s"] and possessive(parse.tokens, n.end)
+                and parse.tokens[n.end + 1 : n.end + 2] in ([], *([w] for w in _SENTENCE_END), [","]))]
             others = [n for n in before if not any(_same_thing(skill, n, t) for t in targets)]
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)
             declared_before = [k for k, _ in parse.declared if k < reference.index]
             if not others and declared_before:
                 continue  # "the plate is in the way, so go around it": an obstacle already
+            if not others:
+                # "there's dolls, teddy bears and toy cars about, go around them": objects only the mention finder
+                # reads (no determiner, words no rule knows); never one of the targets
+                named = [m for m in parse.mentions if m.index < reference.index and not m.permitted and not any(
+                    m.name in (t.name, t.ref().name) for t in targets)]
+                if named:
+                    if reference.kind == "it" and len(named) > 1:
+                        parse.warnings.append(f"'{reference.text}' may mean {' or '.join(m.phrase for m in named)}; "
+                                              "avoiding all of them")
+                    parse.obstacles.extend(m.ref() for m in named)
+                    continue
             if not others:
                 named = [t for t in sorted(targets, key=lambda t: t.index) if t.index < reference.index]
                 if named and not _is_care(reference.text):
@@ -1727,10 +1759,37 @@ def _partitives(words: list[str]) -> list[str]:
 
 
 # Nouns that count or gather what follows "of": "a couple of pipettes" names pipettes, not a couple.
+_INSIDE_OR_ON = frozenset("in into inside on onto".split())
 _QUANTITY_NOUNS = frozenset(
     """couple pair lot lots loads load bunch bunches pile piles stack stacks heap heaps handful number dozen dozens
     plenty row rows set group collection bundle cluster""".split()
 )
+
+
+def _in_existential_list(words: Sequence[str], i: int, verb_positions: set[int]) -> bool:
+    """Whether the noun at `i` is in the list a "there is / there are" opened, no verb nor sentence end between."""
+    k = i - 1
+    while k >= 1 and k not in verb_positions and words[k] not in _SENTENCE_END:
+        if words[k - 1] == "there" and words[k] in (*_COPULAS, "'s", "'re"):
+            return True
+        if words[k] == "theres":
+            return True
+        if words[k] not in _LIST_SEPARATORS and words[k] in _BOUNDARY and words[k] not in DETERMINERS:
+            return False  # "there's a mug by the drawer, open it": a landmark or a new clause
+        k -= 1
+    return False
+
+
+def _placed_in_or_on(words: Sequence[str], i: int) -> bool:
+    """ "put the cork (back) in the bottle": the noun at `i` follows "in" / "on" said of another object put there
+    (not "what's in the bowl", where the bowl is where something comes from)."""
+    k = i - 1
+    while k >= 0 and (words[k] in DETERMINERS or words[k] in _MODIFIERS):
+        k -= 1
+    if k < 2 or words[k] not in _INSIDE_OR_ON:
+        return False
+    k -= 1 + (words[k - 1] == "back")
+    return k >= 1 and words[k].isalpha() and words[k - 1] in DETERMINERS
 
 
 def _quantities(words: list[str]) -> list[str]:
@@ -1871,6 +1930,12 @@ def _front_positions(words: list[str]) -> list[str]:
             continue
         if out[i + len(post) : i + len(post) + 1] == ["of"]:
             i += 1  # "on top of the drawer", "in front of it": a place relative to another object
+            continue
+        following = out[i + len(post)] if i + len(post) < len(out) else ","
+        if following.isalpha() and following not in _BOUNDARY and following not in NOT_OBJECTS and (
+            "NOUN" in word_classes(following)
+        ):
+            i += 1  # "in the middle drawer": the position word is said of the noun after it
             continue
         start = i - 1
         while start > 0 and out[start - 1] not in DETERMINERS and out[start - 1] not in _BOUNDARY | _SENTENCE_END:

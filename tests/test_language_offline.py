@@ -62,7 +62,7 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_9.json", 120, 38, 106),  # first run 75/120 (score_blind.py), 77/120 (convention)
     ("instructions_blind_10.json", 120, 38, 119),  # first run 113/120 (score_blind.py), 115/120 (convention)
     ("instructions_blind_11.json", 143, 43, 143),  # first run 132/143 (score_blind.py), 137/143 (convention)
-    ("instructions_blind_12.json", 149, 45, 146),  # first run 133/149 (score_blind.py), 140/149 (convention)
+    ("instructions_blind_12.json", 149, 45, 147),  # first run 133/149 (score_blind.py), 140/149 (convention)
 ])  # fmt: skip
 def test_later_blind_tables_keep_their_rates_and_stay_safe(table, rows, refusals, exact):
     score = score_table(DATA / table, OfflineDecomposer())

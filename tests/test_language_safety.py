@@ -191,6 +191,7 @@ PERMITTED = [
     "Put the block in the drawer, the mug won't break so don't worry about touching it",
     "Put the block in the drawer, no problem if you graze the mug",  # found by the blind table 11
     "Put the block in the drawer, I don't mind if you bump the mug",  # found by the blind table 12
+    "Put the block in the drawer. the mug doesn't matter, push it aside if you need to",  # blind table 12
 ]
 
 
@@ -226,6 +227,7 @@ REFUSALS = [
     (SeveralTasksError, "put the block in the drawer and close the microwave",
      "two tasks ('put in': bottle_in_drawer, put_item_in_drawer; 'close': close_microwave)"),
     (SeveralTasksError, "Put the block in the drawer, then close it", "'close': close_microwave"),
+    (SeveralTasksError, "put the block in the drawer and push the drawer shut if you need to", "'push shut'"),
     (SeveralTasksError, "Water the plant, then sweep the crumbs into the dustpan", "'water': water_plants; 'sweep'"),
     (ContradictionError, "Put the bottle in the drawer without touching the bottle",
      "'bottle' is the object bottle_in_drawer acts on, and 'without touching' says to keep away from it"),

@@ -167,7 +167,8 @@ _ALLOWED_WORDS = frozenset("ok okay fine allowed acceptable permitted alright".s
 _CONTACT_VERBS = frozenset("touch bump brush nudg knock hitt push mov graz contact".split())  # stems before "-ing"
 
 
-def _permitted_spans(words: Sequence[str]) -> set[int]:
+def permitted_spans(words: Sequence[str]) -> set[int]:
+    """Indices of the tokens a permission covers ("you can nudge the mug", "the towel is fine")."""
     permitted: set[int] = set()
     for i in range(len(words)):
         for phrase in _PERMISSIONS:
@@ -226,7 +227,7 @@ def object_mentions(
     """
     known = _object_words(tuple(sorted(set(object_words))))
     verbs = set(verbs)
-    permitted = _permitted_spans(words)
+    permitted = permitted_spans(words)
     mentions: list[Mention] = []
     i, n = 0, len(words)
     last_end = -1  # where the last noun phrase ended: "that" right there is a relative pronoun ("the bottle that fell")

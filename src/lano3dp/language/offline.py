@@ -61,6 +61,7 @@ from lano3dp.language.mentions import (
     is_adjective,
     names_another,
     object_mentions,
+    permitted_spans,
     possessive,
     word_classes,
 )
@@ -681,6 +682,7 @@ class OfflineDecomposer:
                 continue  # not a clause's verb ("the drawer is open", "a glass of water")
             clauses.setdefault(clause_of[position], []).append((position, verb))
         counted: list[tuple[str, set[str]]] = []
+        permitted = permitted_spans(tokens)
         for clause, verbs in sorted(clauses.items()):
             # the verbs that share the clause with this one: "set the bottle upright" is one phrasal verb
             same = [v for p, v in parse.verb_at if clause_of[p] == clause]
@@ -692,6 +694,11 @@ class OfflineDecomposer:
                 stop += 1
             if all(v.split()[0] in _GENERIC_VERBS for v in chosen) and not _DESTINATIONS & set(tokens[position:stop]):
                 continue
+            said = tokens[position:stop]
+            said = said[: said.index("if")] if "if" in said else said
+            particles = {p for v in chosen for p in v.split()[1:]}
+            if position in permitted and lemmas(tokens[position]) & _COLLISION_VERBS and not particles & set(said):
+                continue  # "push them aside if you need to": leave to touch, not a task ("push it shut" is one)
             counted.append((chosen[0], skills))
         for k, (verb, skills) in enumerate(counted):
             for other, other_skills in counted[k + 1 :]:

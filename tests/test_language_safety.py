@@ -156,6 +156,23 @@ DECLARED = [
      ("close_microwave", ["microwave"], ["mug", "tea towel", "toy truck"])),
     ("Put the block in the middle drawer", ("put_item_in_drawer", ["block", "middle drawer"], [])),
     ("The lamp is my uncle's, so be careful with it and open the drawer", ("open_drawer", ["drawer"], ["lamp"])),
+    # found by the blind table 13: the other place of a contrast, an unknown plural said to be there, a material
+    # before the noun, a target's head said alone, a plural noun that is also a verb, a verb after its subject,
+    # what the subject is said to be, a thing not wanted, a slot's compound synonym
+    ("Put the phone on the white base, not on the black one", ("phone_on_base", ["phone", "white base"],
+                                                               ["black base"])),
+    ("Open the drawer, there are paintbrushes and rulers in front of it, avoid them",
+     ("open_drawer", ["drawer"], ["paintbrush", "ruler"])),
+    ("Close the microwave, careful of the porcelain teapot", ("close_microwave", ["microwave"], ["teapot"])),
+    ("Water the plant with the watering can; the soldering iron is hot, keep the can away from it",
+     ("water_plants", ["watering can", "plant"], ["soldering iron"])),
+    ("Open the drawer and keep clear of the toy blocks", ("open_drawer", ["drawer"], ["toy block"])),
+    ("Open the drawer, the mug blocks the way", ("open_drawer", ["drawer"], ["mug"])),
+    ("That vase was a wedding present, so stay clear of it while you put the phone on the charger",
+     ("phone_on_base", ["phone", "base"], ["vase"])),
+    ("I don't want the red block, put the blue block in the drawer", ("put_item_in_drawer", ["blue block", "drawer"],
+                                                                      ["red block"])),
+    ("Sweep the dirt into the dustpan with the hand brush", ("sweep_to_dustpan", ["broom", "dustpan"], [])),
 ]  # fmt: skip
 
 
@@ -192,6 +209,7 @@ PERMITTED = [
     "Put the block in the drawer, no problem if you graze the mug",  # found by the blind table 11
     "Put the block in the drawer, I don't mind if you bump the mug",  # found by the blind table 12
     "Put the block in the drawer. the mug doesn't matter, push it aside if you need to",  # blind table 12
+    "Put the block in the drawer. The spoon and the mug can both be touched.",  # found by the blind table 13
 ]
 
 
@@ -236,6 +254,7 @@ REFUSALS = [
      "'don't touch it' can only mean what put_item_in_drawer acts on (block, drawer)"),
     (NegatedCommandError, "Don't you dare put the phone on the base", "'don't you dare put the phone on the base'"),
     (NegatedCommandError, "I don't want you to sweep the dirt into the dustpan", "'don't want you to sweep"),
+    (NegatedCommandError, "I don't want the bottle put in the drawer", "'don't want the bottle put in the drawer'"),
     (ContradictionError, "Stand the bottle upright while avoiding every bottle", "'bottle' is the object"),
     # verbs of abstaining negate the task verb after them
     (NegatedCommandError, "Refrain from opening the microwave door", "'refrain from opening the microwave door'"),
@@ -420,8 +439,8 @@ NOT_REFUSED = [
     # "right" before a place is an adverb, so the sentence it is in asks for no task
     ("There's a stapler right beside the drawer. Put the sponge in the drawer.",
      ("put_item_in_drawer", ["sponge", "drawer"], ["stapler"])),
-    ("Gently put the plastic frog in the drawer past the mug", ("put_item_in_drawer", ["plastic frog", "drawer"],
-                                                              ["mug"])),
+    # what a thing is made of is no part of its name, as "the wooden drawer" is a drawer
+    ("Gently put the plastic frog in the drawer past the mug", ("put_item_in_drawer", ["frog", "drawer"], ["mug"])),
 ]
 
 

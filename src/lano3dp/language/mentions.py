@@ -163,8 +163,22 @@ def _known_at(words: Sequence[str], i: int, known: dict[str, list[tuple[str, ...
     return 0
 
 
+_AFTER_MODAL = frozenset("both all also still safely easily freely".split())
 _ALLOWED_WORDS = frozenset("ok okay fine allowed acceptable permitted alright".split())
 _CONTACT_VERBS = frozenset("touch bump brush nudg knock hitt push mov graz contact".split())  # stems before "-ing"
+
+
+def _joins_subjects(words: Sequence[str], k: int) -> bool:
+    """ "the spoon and the oven mitt can be touched": "and" at `k` joins two noun phrases of one subject (the
+    phrase before it is a determiner and nouns, opening its clause)."""
+    if words[k] != "and" or words[k + 1 : k + 2] == [] or words[k + 1] not in _DETERMINERS:
+        return False
+    start = k - 1
+    while start >= 0 and words[start] not in _CLAUSE_END:
+        start -= 1
+    phrase = words[start + 1 : k]
+    return len(phrase) >= 2 and phrase[0] in _DETERMINERS and all(
+        w.isalpha() and (w in _MODIFIERS or not word_classes(w) or "NOUN" in word_classes(w)) for w in phrase[1:])
 
 
 def permitted_spans(words: Sequence[str]) -> set[int]:
@@ -177,12 +191,14 @@ def permitted_spans(words: Sequence[str]) -> set[int]:
                 while k < len(words) and words[k] not in _CLAUSE_END:
                     permitted.add(k)
                     k += 1
+        # "the spoon and the mitt can both be touched": a quantifier or adverb after the modal changes nothing
+        skip = 1 if words[i] in ("can", "may") and words[i + 1 : i + 2] and words[i + 1] in _AFTER_MODAL else 0
         for phrase in _PERMITTED_AFTER:
-            if tuple(words[i : i + len(phrase)]) == phrase:
+            if (words[i], *words[i + 1 + skip : i + len(phrase) + skip]) == phrase:
                 k = i - 1 - (words[i - 1 : i] == [":"])  # "towel: contact ok"
                 if words[k : k + 1] in (["that"], ["this"], ["it"]) and words[k - 1 : k] == [","]:
                     k -= 2  # "if you have to nudge the board, that's fine": the clause before it
-                while k >= 0 and words[k] not in _CLAUSE_END:
+                while k >= 0 and (words[k] not in _CLAUSE_END or _joins_subjects(words, k)):
                     permitted.add(k)
                     k -= 1
         if words[i] in _ALLOWED_WORDS and (i + 1 == len(words) or words[i + 1] in _CLAUSE_END):
@@ -239,6 +255,9 @@ def object_mentions(
         if word in _SWEEP_VERBS and (words[i - 1] if i else ",") in _CLAUSE_START:
             i = _after_swept(words, i + 1, known, verbs)  # "sweep the sand ...": what is swept is no object
             continue
+        if last_end == i - 1 and predicate_noun(words, i):
+            i = _noun_run(words, i + 1, known, verbs)  # "that vase was a wedding present": the vase again
+            continue
         if word in _DETERMINERS or word in _MODIFIERS or possessive(words, i):
             j = i
             while j < n and (words[j] in _DETERMINERS or words[j] in _MODIFIERS or possessive(words, j)):
@@ -250,6 +269,9 @@ def object_mentions(
                 last_end = end
             i = max(end, j, i + 1)
             continue
+        if i == last_end and _verb_with_object(words, i):
+            i += 1  # "the mug blocks the way": no "block" named
+            continue
         length = _known_at(words, i, known)
         previous = words[i - 1] if i else ","
         if i and last_end == i - 1 and _coordinated_noun(words, i, length, verbs):
@@ -260,6 +282,8 @@ def object_mentions(
                 last_end = end
             i = max(end, i + 1)
             continue
+        if not length and tuple(words[i - 2 : i]) in _EXISTENTIAL and _plural_noun(word) and word not in verbs:
+            length = 1  # "there are paintbrushes and rulers": a plural said to be there names objects, known or not
         ambiguous = word in _AMBIGUOUS_BARE and not _bare_plural_noun(words, i) and not _bare_noun_said(words, i)
         if length and not ambiguous and word not in NOT_OBJECTS and not (word in verbs and previous in _CLAUSE_START):
             end = _noun_run(words, i, known, verbs)
@@ -280,6 +304,9 @@ _AFTER_PLURAL_HEAD = frozenset(
     .split()
 )
 _PARTICLES_AFTER_VERBS = frozenset("out up down over off away around for about".split())
+
+
+_EXISTENTIAL = frozenset({("there", "are"), ("there", "'re"), ("there", "were")})
 
 
 def _plural_noun(word: str) -> bool:
@@ -318,14 +345,20 @@ def _coordinated_noun(words: Sequence[str], i: int, known_length: int, verbs: se
         word_classes(following) & {"NOUN"})
 
 
+# What a thing is made of describes it and is no part of its name ("the porcelain teapot" is a teapot). Not
+# "glass", "paper" or "rubber": they also name things and start compound names ("paper towel", "rubber duck").
+MATERIALS = frozenset(
+    """plastic wooden metal metallic ceramic steel cardboard porcelain silk leather cotton wool woollen woolen
+    velvet linen wicker bamboo copper brass aluminium aluminum enamel suede satin nylon denim terracotta pewter
+    bronze stainless""".split()
+)
 _PRONOUNS_BEFORE_IS = frozenset("that it there here what who he she this where which".split())
 _ADJECTIVES = frozenset(
     """open closed shut empty full dirty clean old new broken cracked upright fallen lying standing tipped wet dry
-    hot cold warm heavy light plastic wooden metal metallic ceramic glass paper cardboard steel iron rubber
-    fragile delicate shiny dull round square flat tall short big small little large huge tiny long narrow wide
-    nice pretty ugly spare extra same different whole half favourite favorite usual neighbouring neighboring
-    adjacent nearby""".split()
-)
+    hot cold warm heavy light glass paper iron rubber fragile delicate shiny dull round square flat tall short big
+    small little large huge tiny long narrow wide nice pretty ugly spare extra same different whole half favourite
+    favorite usual neighbouring neighboring adjacent nearby""".split()
+) | MATERIALS
 
 
 # Adjectives that, said alone after an article, name a thing ("the iron", "a rubber", "a little light").
@@ -407,6 +440,13 @@ def _bare_noun_said(words: Sequence[str], i: int) -> bool:
     return previous in _CLAUSE_END and following in _WHERE_AFTER_BARE
 
 
+def predicate_noun(words: Sequence[str], i: int) -> bool:
+    """ "(that vase) was a wedding present": an indefinite noun phrase at `i` after "is"/"was" says what the
+    subject is, and names no other object. Not after "there", "it" or "that" ("there's a mug")."""
+    return words[i] in ("a", "an") and i >= 2 and words[i - 1] in ("is", "was", "'s") and (
+        words[i - 2].isalpha() and words[i - 2] not in _PRONOUNS_BEFORE_IS)
+
+
 def possessive(words: Sequence[str], i: int) -> bool:
     """ "'s" after a noun ("the bowl's contents"); after "that", "it", "there" it is "is"."""
     has = words[i + 1 : i + 2] in (["been"], ["got"], ["gotten"])  # "the microwave's been left open"
@@ -423,8 +463,10 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
     while end < len(words):
         word = words[end]
         more = _known_at(words, end, known)
-        if word == "can" and words[end + 1 : end + 2] in (["be"], ["you"], ["i"], ["we"], ["not"], ["now"]):
-            break  # "the mug can be moved": a modal verb
+        if word == "can" and _modal_can(words, end):
+            break  # "the mug can be moved", "the mitt can both be touched": a modal verb
+        if end > j and _verb_with_object(words, end):
+            break  # "the mug blocks the way", "the cat knocks it": the verb after its subject, with its object
         if more:
             end += more
         elif word == "can" and end > j:
@@ -444,6 +486,23 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
         else:
             break
     return end
+
+
+def _verb_with_object(words: Sequence[str], i: int) -> bool:
+    """words[i] is a verb of the third person with its object after it ("blocks the way", "knocks it")."""
+    word = words[i]
+    return word.endswith("s") and "VERB" in word_classes(word) and words[i + 1 : i + 2] != [] and (
+        words[i + 1] in _DETERMINERS or words[i + 1] in ("it", "them"))
+
+
+def _modal_can(words: Sequence[str], i: int) -> bool:
+    """ "can" at `i` is the modal verb ("the mug can be moved", "can both be touched"), not "the tin can"."""
+    following = words[i + 1] if i + 1 < len(words) else "."
+    if following in ("be", "you", "i", "we", "not", "now", "both", "all", "also", "still", "safely", "easily"):
+        return True
+    classes = word_classes(following) if following.isalpha() else frozenset()
+    base_verb = "VERB" in classes and not following.endswith("s")  # "can go", not "the paint can sits"
+    return "NOUN" not in classes and (base_verb or "ADV" in classes)
 
 
 def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Mention | None:
@@ -595,7 +654,9 @@ def is_target(
 def names_another(name: str, slot_word: str, typed_word: str | None) -> bool:
     """Whether a word of a target's slot names another object of that kind: a specific word other than the one the
     target was named with ("water the plant, the cactus is prickly"); the slot's own word may mean either."""
-    return typed_word is not None and not {name, singular(name)} & {typed_word, slot_word}
+    said = {typed_word, slot_word} if typed_word is not None else set()
+    said |= {w.split()[-1] for w in said if " " in w}  # "the can" after "the watering can" is that can
+    return typed_word is not None and not {name, singular(name)} & said
 
 
 def is_obstacle(mention: Mention, plan: TaskPlan) -> bool:

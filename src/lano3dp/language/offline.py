@@ -53,6 +53,7 @@ from lano3dp.language.exceptions import (
 from lano3dp.language.grounding import ground_plan
 from lano3dp.language.mentions import (
     DESCRIBING,
+    MATERIALS,
     NOT_OBJECTS,
     SUBJECT_VERBS,
     UNITS,
@@ -63,6 +64,7 @@ from lano3dp.language.mentions import (
     object_mentions,
     permitted_spans,
     possessive,
+    predicate_noun,
     word_classes,
 )
 from lano3dp.language.normalize import normalize_instruction
@@ -212,9 +214,12 @@ _CUES: tuple[tuple[str, ...], ...] = (
     ("dont", "<hit>"), ("not", "<hit>"), ("never", "<hit>"), ("but", "not"), ("and", "not"),
     ("not", "near"), ("not", "close", "to"), ("not", "<det>"), ("watch", "<det>"),
     ("skip", "<det>"),  # "skip the red block and put the blue one in ...": left alone, so avoided
+    ("not", "on", "<det>"), ("not", "in", "<det>"), ("not", "into", "<det>"), ("not", "onto", "<det>"),
+    ("not", "inside", "<det>"),  # "on the white base, not on the black one": the other place is avoided
     ("keep", "off"), ("stay", "off"), ("keeping", "off"), ("staying", "off"),
 )  # fmt: skip
-_CONTRASTS = frozenset({("not", "<det>"), ("but", "not"), ("and", "not")})
+_CONTRASTS = frozenset({("not", "<det>"), ("but", "not"), ("and", "not")}) | {
+    c for c in _CUES if c[0] == "not" and c[-1] == "<det>"}
 # Predicates said of the noun phrase before them ("the mug is in the way").
 _WAY_MARKERS: tuple[tuple[str, ...], ...] = (
     ("in", "the", "way"), ("in", "my", "way"), ("in", "your", "way"), ("in", "its", "way"),
@@ -645,6 +650,12 @@ class OfflineDecomposer:
                 j += 1
             if j >= len(words):
                 continue
+            if _WANTING & set(words[i + 1 : j]) and not self._is_task_verb(words[j]):
+                wanted = self._wanted_verb(words, j)  # "I don't want the bottle put in the drawer"
+                if wanted == j and words[j] in DETERMINERS and self._rejected_object(words, j):
+                    words[i:j] = [","] * (j - i - 1) + ["not"]  # "I don't want the red block, ...": not that one
+                    continue
+                j = wanted
             forms = lemmas(words[j])
             if not (forms & self._single_verbs or any(v[0] in forms for v in self._phrasal)):
                 continue
@@ -664,6 +675,31 @@ class OfflineDecomposer:
             parse.negated_verbs.extend((verb, said_of) for verb in sorted(forms & self._single_verbs))
             for k in range(start, end):
                 words[k] = ","
+
+    def _is_task_verb(self, word: str) -> bool:
+        forms = lemmas(word)
+        return bool(forms & self._single_verbs) or any(v[0] in forms for v in self._phrasal)
+
+    def _wanted_verb(self, words: list[str], j: int) -> int:
+        """After "want" at j - 1: the task verb that follows its object ("want the bottle put ...", "want the
+        drawer opened"), or `j` if there is none within a short noun phrase."""
+        k = j
+        while k < len(words) and k - j < 5 and (words[k] in DETERMINERS or words[k] in _MODIFIERS or (
+            words[k].isalpha() and not self._is_task_verb(words[k]) and words[k] not in _BOUNDARY
+        )):
+            k += 1
+        return k if k < len(words) and k > j and self._is_task_verb(words[k]) else j
+
+    @staticmethod
+    def _rejected_object(words: list[str], j: int) -> bool:
+        """ "(I don't want) the red block, put the blue one ...": a noun phrase alone in its clause."""
+        k = j + 1
+        while k < len(words) and k - j < 5 and words[k].isalpha() and words[k] not in _BOUNDARY and (
+            words[k] in _MODIFIERS or words[k] in COLOURS or not word_classes(words[k])
+            or "NOUN" in word_classes(words[k])
+        ):
+            k += 1
+        return k > j + 1 and (k == len(words) or words[k] in _SENTENCE_END or words[k] == ",")
 
     def _check_one_task(self, instruction: str, parse: Parse) -> None:
         """Refuse two tasks in one instruction: task verbs that start clauses ("open the drawer and put the block
@@ -776,6 +812,7 @@ class OfflineDecomposer:
             start = i + len(cue)
             if cue[-1] == "<det>":
                 start -= 1  # the determiner belongs to the noun phrase ("not the mug")
+                cue_words = cue_words[:-1]
             while start < len(words) and (
                 words[start] in _PARTICLES or words[start] in (":", "=", "anywhere", "somewhere")
                 or (words[start].endswith("ing") and _matches("<hit>", words[start]))
@@ -840,6 +877,10 @@ class OfflineDecomposer:
         spans = []
         for i in range(len(words)):
             marker = next((m for m in _WAY_MARKERS if self._cue_at(words, i, m)), None)
+            if marker in (("blocks",), ("obstructs",)) and not (
+                words[i + 1 : i + 2] and (words[i + 1] in DETERMINERS or words[i + 1] in ("it", "them", "access"))
+            ):
+                marker = None  # "the toy blocks are fragile": a plural noun, not the verb ("the mug blocks the way")
             if marker is not None:
                 stop = i + len(marker)
                 if marker[0] in ("blocking", "blocks", "obstructing", "obstructs"):
@@ -1047,8 +1088,10 @@ class OfflineDecomposer:
                 nouns.append(word)
             elif word not in POSITION_WORDS:
                 vague = True  # "anything else": nothing after a vague head is its noun
-        while len(nouns) > 1 and nouns[0] in DESCRIBING and "NOUN" not in word_classes(nouns[0]):
-            nouns.pop(0)  # "the hot red pan": a pan, described; not "the rubber duck", "the remote control"
+        while len(nouns) > 1 and nouns[0] in DESCRIBING and (
+            "NOUN" not in word_classes(nouns[0]) or nouns[0] in MATERIALS and " ".join(nouns) not in OBJECT_NOUNS
+        ):
+            nouns.pop(0)  # "the hot red pan", "the porcelain teapot"; not "the rubber duck", "the remote control"
         nouns = nouns[-_MAX_COMPOUND:]  # "the a b c d e f": no object's name is a run of words
         if not nouns or len(" ".join(nouns)) > MAX_NAME_CHARS:
             return None
@@ -1415,6 +1458,7 @@ class OfflineDecomposer:
             before = [n for n in before if not (
                 not n.known and parse.tokens[n.end : n.end + 1] == ["'s"] and possessive(parse.tokens, n.end)
                 and parse.tokens[n.end + 1 : n.end + 2] in ([], *([w] for w in _SENTENCE_END), [","]))]
+            before = [n for n in before if not predicate_noun(parse.tokens, n.index - 1)]  # "... was a gift"
             others = [n for n in before if not any(_same_thing(skill, n, t) for t in targets)]
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)
@@ -1425,7 +1469,7 @@ class OfflineDecomposer:
                 # "there's dolls, teddy bears and toy cars about, go around them": objects only the mention finder
                 # reads (no determiner, words no rule knows); never one of the targets
                 named = [m for m in parse.mentions if m.index < reference.index and not m.permitted and not any(
-                    m.name in (t.name, t.ref().name) for t in targets)]
+                    m.name in (t.name, t.ref().name) or _short_for(m, t.ref()) for t in targets)]
                 if named:
                     if reference.kind == "it" and len(named) > 1:
                         parse.warnings.append(f"'{reference.text}' may mean {' or '.join(m.phrase for m in named)}; "
@@ -1528,6 +1572,14 @@ class OfflineDecomposer:
                 f"{skill.name}; it is not made an obstacle"
             )
         return kept
+
+
+def _short_for(said: Mention | ObjectRef, target: ObjectRef) -> bool:
+    """ "the can" said after "the watering can": a target's compound name said by its head alone (no attribute
+    that differs) is the target."""
+    words, theirs = said.name.split(), target.name.split()
+    return set(words) < set(theirs) and words[-1] == theirs[-1] and all(
+        getattr(said, a) in (None, getattr(target, a)) for a in ("color", "size", "position"))
 
 
 def _is_care(cue: str) -> bool:
@@ -1675,6 +1727,7 @@ def _exact(slot: Slot, noun: str) -> bool:
 def _same_thing(skill: SkillSpec, noun: _Noun, target: _Noun) -> bool:
     """Whether a mention is (or may be) the target again: the same kind, no attribute that tells them apart."""
     same_kind = noun.name == target.name or any(s.matches(noun.name) and s.matches(target.name) for s in skill.slots)
+    same_kind = same_kind or _short_for(noun.ref(), target.ref())  # "the can" after "the watering can"
     if not same_kind or noun.position == "other":
         return False
     return all(

@@ -173,6 +173,9 @@ DECLARED = [
     ("I don't want the red block, put the blue block in the drawer", ("put_item_in_drawer", ["blue block", "drawer"],
                                                                       ["red block"])),
     ("Sweep the dirt into the dustpan with the hand brush", ("sweep_to_dustpan", ["broom", "dustpan"], [])),
+    # a side said with "-hand", a plural owner
+    ("Open the left-hand drawer", ("open_drawer", ["left drawer"], [])),
+    ("Pour the bowl into the pan, the kids' toys are everywhere", ("bowl_pour", ["bowl", "pan"], ["toy"])),
 ]  # fmt: skip
 
 
@@ -247,6 +250,9 @@ REFUSALS = [
     (SeveralTasksError, "Put the block in the drawer, then close it", "'close': close_microwave"),
     (SeveralTasksError, "put the block in the drawer and push the drawer shut if you need to", "'push shut'"),
     (SeveralTasksError, "Water the plant, then sweep the crumbs into the dustpan", "'water': water_plants; 'sweep'"),
+    # a task in a clause opened by "before" or "after" is a task too
+    (SeveralTasksError, "Before watering the plant, sweep the floor", "'water': water_plants; 'sweep'"),
+    (SeveralTasksError, "After opening the drawer, put the block in it", "'open': open_drawer, open_wine_bottle;"),
     (ContradictionError, "Put the bottle in the drawer without touching the bottle",
      "'bottle' is the object bottle_in_drawer acts on, and 'without touching' says to keep away from it"),
     (ContradictionError, "Pour the bowl into the pan and avoid the bowl", "'bowl' is the object bowl_pour acts on"),

@@ -181,7 +181,8 @@ _PROPERTY_WORDS = frozenset("fragile delicate breakable hot sharp precious valua
 _DEGREE = frozenset("very quite really extremely super so too rather a bit".split())
 # What may stand between a clause break and its verb ("and then carefully pour").
 _CLAUSE_OPENERS = frozenset(
-    "please now then also just carefully gently slowly first next finally go ahead and to you".split()
+    "please now then also just carefully gently slowly first next finally go ahead and to you before after once when"
+    .split()
 )
 _TASK_BREAKS = frozenset(". ; : ! ? , and then also plus afterwards".split())
 _SEQUENCE_OPENERS = frozenset({("after", "that"), ("after", "this"), ("after", "which"), ("once", "done")})
@@ -247,7 +248,9 @@ def tokenize(text: str) -> list[str]:
     """Lower-case words and punctuation; "bowl's" -> bowl 's, "there's" -> there 's (the noun stays a noun)."""
     words = []
     text = re.sub(r"\s[-–—]+\s|[–—]", " , ", text)  # a dash between words breaks the clause like a comma
-    for word in _WORD.findall(text.lower().replace("’", "'")):
+    text = re.sub(r"\b(left|right)-hand(ed)?\b", r"\1", text.lower().replace("’", "'"))  # "the left-hand drawer"
+    text = re.sub(r"\b([a-z]+s)'(?= [a-z])", r"\1's", text)  # "the kids' toys": a plural owner, as "the kid's toys"
+    for word in _WORD.findall(text):
         ending = next((e for e in _CLITICS if word.endswith(e) and len(word) > len(e)), None)
         words.extend([word[: -len(ending)], ending] if ending else [word])
     return words

@@ -277,6 +277,10 @@ REFUSALS = [
     (InstructionNotUnderstoodError, "why did you open the drawer", "it is a question, not a task"),
     (InstructionNotUnderstoodError, "Pull the drawer closed", "'drawer closed' asks for the drawer to end up closed"),
     (InstructionNotUnderstoodError, "Set the block down on the counter", "'on the counter' is not where"),
+    # a place right after the carried object that is no slot of the skill: the drawer would be the wrong place
+    (InstructionNotUnderstoodError, "Put the block on the plate",
+     "'on the plate' is not where put_item_in_drawer puts things (the drawer)"),
+    (InstructionNotUnderstoodError, "put the bottle in the cupboard", "'in the cupboard' is not where bottle_in"),
     (ContradictionError, "Pour the bowl into the pan but keep your hand off the bowl", "'keep off' says to keep"),
     (InstructionNotUnderstoodError, "Is the drawer open?", "it is a question, not a task"),
     (InstructionNotUnderstoodError, "Where did you put the phone?", "it is a question, not a task"),

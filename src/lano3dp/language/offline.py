@@ -1674,7 +1674,15 @@ def _check_outcome(instruction: str, skill: SkillSpec, tokens: Sequence[str], fi
         k = i + 1
         while k < len(tokens) and (tokens[k] in DETERMINERS or tokens[k] in ("'s", "own")):
             k += 1
-        if k < len(tokens) and tokens[k] in _SURFACES:
+        after_carried = any(slot.carried and k_ in filled and filled[k_].end in (i, i - 1) and (
+            filled[k_].end == i or tokens[i - 1] in ("back", "down")) for k_, slot in enumerate(skill.slots))
+        # "put the block on the plate": a place said right after the carried object that is no slot of the skill
+        # is where the user wants it, so the skill's own destination (the drawer) would be the wrong place
+        other_place = after_carried and k < len(tokens) and tokens[k].isalpha() and tokens[k] not in NOT_OBJECTS and (
+            word_classes(tokens[k]) == {"NOUN"} or singular(tokens[k]) in OBJECT_NOUNS  # not "the stand"
+        ) and not any(slot.matches(singular(tokens[k])) for slot in skill.slots)
+        other_place = other_place and not {"its", "their"} & set(tokens[i + 1 : k])  # "on its stand": its own base
+        if k < len(tokens) and (tokens[k] in _SURFACES or other_place):
             said = " ".join(tokens[i : k + 1])
             raise InstructionNotUnderstoodError(
                 instruction, f"'{said}' is not where {skill.name} puts things (the "

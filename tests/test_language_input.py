@@ -127,6 +127,8 @@ TYPOS = [
     # shorthand: a noun after a verb or a preposition, a verb after a modal
     ("Put blcok in drawer.", "put_item_in_drawer(block, drawer)", "read 'blcok' as 'block' (a typo?)"),
     ("The drawer you must opne, please", "open_drawer(drawer)", "read 'opne' as 'open' (a typo?)"),
+    # a verb no English dictionary has: a changed letter is a typo in a short word too (the blind table 14)
+    ("sweap the dirt into the dustpan", "sweep_to_dustpan(broom, dustpan)", "read 'sweap' as 'sweep' (a typo?)"),
 ]
 
 

@@ -176,6 +176,18 @@ DECLARED = [
     # a side said with "-hand", a plural owner
     ("Open the left-hand drawer", ("open_drawer", ["left drawer"], [])),
     ("Pour the bowl into the pan, the kids' toys are everywhere", ("bowl_pour", ["bowl", "pan"], ["toy"])),
+    # found by the blind table 14: an irregular participle before the noun, "that one" after the object was
+    # avoided, "none of them", a side after the noun before a verb, "my work one", a state the object was left in
+    ("Open the bottle, there's a lit candle just beside it", ("open_wine_bottle", ["bottle"], ["candle"])),
+    ("Stand the green bottle upright. The brown bottle behind it is wobbly so don't touch that one",
+     ("bottle_upright", ["green bottle"], ["brown bottle"])),
+    ("Open the bottle. A glass and a candle are next to it, none of them can be knocked",
+     ("open_wine_bottle", ["bottle"], ["glass", "candle"])),
+    ("Pour the bowl into the pan. The red mug on the left stays untouched", ("bowl_pour", ["bowl", "pan"],
+                                                                             ["left red mug"])),
+    ("Water the plant and stay away from the laptop, it's my work one", ("water_plants", ["watering can", "plant"],
+                                                                         ["laptop"])),
+    ("Somebody left the microwave open again, close it please", ("close_microwave", ["microwave"], [])),
 ]  # fmt: skip
 
 
@@ -213,6 +225,8 @@ PERMITTED = [
     "Put the block in the drawer, I don't mind if you bump the mug",  # found by the blind table 12
     "Put the block in the drawer. the mug doesn't matter, push it aside if you need to",  # blind table 12
     "Put the block in the drawer. The spoon and the mug can both be touched.",  # found by the blind table 13
+    "Put the block in the drawer, I don't care if you knock the mug",  # found by the blind table 14
+    "Put the block in the drawer, I'm not bothered if the mug gets moved",
 ]
 
 

@@ -88,6 +88,9 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("can", "brush"), ("may", "nudge"), ("can", "nudge"), ("fine", "if"), ("ok", "if"), ("okay", "if"),
     ("alright", "if"), ("matter", "if"), ("no", "problem", "if"), ("not", "a", "problem", "if"),
     ("no", "worries", "if"), ("don't", "mind"), ("dont", "mind"), ("do", "not", "mind"),
+    ("don't", "care", "if"), ("dont", "care", "if"), ("do", "not", "care", "if"), ("don't", "care", "about"),
+    ("dont", "care", "about"), ("not", "bothered", "if"), ("not", "bothered", "about"), ("not", "fussed", "if"),
+    ("not", "fussed", "about"),
 )  # fmt: skip
 # Said after an object, permitting contact with it ("the mug can be moved", "the mug may be touched").
 _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
@@ -393,9 +396,18 @@ def is_adjective(word: str) -> bool:
     if "ADJ" in classes:
         return True
     if classes == {"VERB"}:
-        return word.endswith(("ed", "en"))  # "battered", "chipped"; not "-ing": "frying pan", "mixing bowl"
+        # "battered", "chipped", and irregular participles ("lit", "burnt", "torn"); not "-ing": "frying pan"
+        return word.endswith(("ed", "en")) or _irregular_participle(word)
     # a word the lexicon lacks: by its suffix
     return len(word) > 4 and word.endswith(("ed", "ic", "ous", "ful", "less", "ive", "ish", "ble"))
+
+
+@functools.cache
+def _irregular_participle(word: str) -> bool:
+    import lemminflect
+
+    return any(word != lemma and word in (*lemminflect.getInflection(lemma, "VBN"), *lemminflect.getInflection(
+        lemma, "VBD")) for lemma in lemminflect.getAllLemmas(word).get("VERB", ()))  # "lit" is only a VBD there
 
 
 def _bare_plural_noun(words: Sequence[str], i: int) -> bool:
@@ -510,6 +522,8 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     chunk = list(words[j:end])
     if _degree_before_state(words, i, j, end, known):
         return None
+    if len(chunk) > 1 and chunk[-1] in ("one", "ones") and not _known_at(chunk, 0, known):
+        return None  # "the laptop, it's my work one": a word that tells the object named before from others
     known_ends = [k + _known_at(chunk, k, known) for k in range(len(chunk)) if _known_at(chunk, k, known)]
     if known_ends:
         rest = chunk[max(known_ends) :]

@@ -1022,8 +1022,8 @@ class OfflineDecomposer:
         bare = tuple(w for w in content if w not in ("very", "just", "also", "either", "any"))
         while len(bare) > 1 and bare[-1] in ("over", "off", "down", "up", "away", "around"):
             bare = bare[:-1]  # "don't knock it over"
-        if len(bare) > 1 and bare[0] in ("it", "they") and bare[1] not in ("and", "or"):
-            bare = bare[:1]  # "the kettle, it just boiled": a clause about what was named, whose subject it is
+        if len(bare) > 1 and bare[0] in ("it", "they", "them") and bare[1] not in ("and", "or"):
+            bare = bare[:1]  # "the kettle, it just boiled", "none of them can be knocked": a clause about them
         if bare in _PRONOUNS:
             parse.references.append(_Reference(index, _PRONOUNS[bare], f"{cue} {' '.join(bare)}".strip()))
             return
@@ -1091,7 +1091,7 @@ class OfflineDecomposer:
                 nouns.append(word)
             elif word not in POSITION_WORDS:
                 vague = True  # "anything else": nothing after a vague head is its noun
-        while len(nouns) > 1 and nouns[0] in DESCRIBING and (
+        while len(nouns) > 1 and (nouns[0] in DESCRIBING or is_adjective(nouns[0])) and (
             "NOUN" not in word_classes(nouns[0]) or nouns[0] in MATERIALS and " ".join(nouns) not in OBJECT_NOUNS
         ):
             nouns.pop(0)  # "the hot red pan", "the porcelain teapot"; not "the rubber duck", "the remote control"
@@ -1453,6 +1453,7 @@ class OfflineDecomposer:
         """ "there's a vase nearby, avoid it": a pronoun in an obstacle declaration means an object named
         before it that is not a target. Several candidates: all are avoided and a warning says so; only
         targets: no obstacle, a warning; nothing at all: a refusal, since the obstacle cannot be dropped."""
+        avoided_at: list[int] = []  # where the objects earlier references resolved to were named
         for reference in parse.references:
             assigned, free = self._assign(skill, parse.nouns)
             targets = [noun for noun, _ in assigned.values()]
@@ -1466,6 +1467,7 @@ class OfflineDecomposer:
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)
             declared_before = [k for k, _ in parse.declared if k < reference.index]
+            declared_before += [k for k in avoided_at if k < reference.index]  # "..., don't touch that one" again
             if not others and declared_before:
                 continue  # "the plate is in the way, so go around it": an obstacle already
             if not others:
@@ -1505,6 +1507,7 @@ class OfflineDecomposer:
                 if noun in parse.nouns:
                     parse.nouns.remove(noun)
                 parse.obstacles.append(noun.ref())
+                avoided_at.append(noun.index)
 
     @staticmethod
     def _other_one(skill, reference, before, others, targets, parse) -> list[_Noun]:
@@ -1660,6 +1663,13 @@ def _check_outcome(instruction: str, skill: SkillSpec, tokens: Sequence[str], fi
     for noun in filled.values():
         result = tokens[noun.end] if noun.end < len(tokens) else ""
         opposite = {"shut": "open", "closed": "open", "open": "close"}.get(result)
+        before = noun.index - 1
+        while before > 0 and tokens[before] not in _KEEPING and (
+            tokens[before] in DETERMINERS or tokens[before] in _MODIFIERS
+        ):
+            before -= 1  # "left" is a side as well
+        if before >= 0 and (tokens[before] in _KEEPING or _past_form(tokens[before])):
+            continue  # "somebody left the microwave open": how it is now, not the outcome asked for
         if opposite and skill.name.startswith(opposite):
             raise InstructionNotUnderstoodError(
                 instruction, f"'{noun.name} {result}' asks for the {noun.name} to end up {result}, which "
@@ -2003,9 +2013,9 @@ def _front_positions(words: list[str]) -> list[str]:
             i += 1  # "on top of the drawer", "in front of it": a place relative to another object
             continue
         following = out[i + len(post)] if i + len(post) < len(out) else ","
-        if following.isalpha() and following not in _BOUNDARY and following not in NOT_OBJECTS and (
+        if following.isalpha() and following not in _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS and (
             "NOUN" in word_classes(following)
-        ):
+        ):  # not "the pan on the left stays untouched": a verb after its subject
             i += 1  # "in the middle drawer": the position word is said of the noun after it
             continue
         start = i - 1

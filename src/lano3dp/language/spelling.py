@@ -151,8 +151,9 @@ def correct_typos(
             # a real word is no typo where a noun stands ("left ajar" is no "left jar")
             choice = None if english else correct_word(word, nouns, substitution_from=6)
         elif previous in _CLAUSE_STARTS:
-            # a real word that can be a verb is no typo there; "poor the bowl" is one
-            choice = None if "VERB" in english else correct_word(word, verbs, substitution_from=7)
+            # a real word that can be a verb is no typo there; "poor the bowl" is one. A word English lacks
+            # ("sweap") is another word by no reading, so a changed letter is a typo in a short verb too
+            choice = None if "VERB" in english else correct_word(word, verbs, substitution_from=7 if english else 4)
         else:
             choice = None
         if choice is not None:

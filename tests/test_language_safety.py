@@ -188,6 +188,14 @@ DECLARED = [
     ("Water the plant and stay away from the laptop, it's my work one", ("water_plants", ["watering can", "plant"],
                                                                          ["laptop"])),
     ("Somebody left the microwave open again, close it please", ("close_microwave", ["microwave"], [])),
+    # the table is no obstacle "them" can mean; "keep your distance from"
+    ("Put the block in the drawer. My glasses are on the table, please don't break them",
+     ("put_item_in_drawer", ["block", "drawer"], ["glass"])),
+    ("Put the block in the drawer, keep a safe distance from the lamp", ("put_item_in_drawer", ["block", "drawer"],
+                                                                         ["lamp"])),
+    # what the user wants done to an object: "I want the drawer opened"
+    ("I'd like the drawer opened", ("open_drawer", ["drawer"], [])),
+    ("I need the microwave closed, mind the kettle", ("close_microwave", ["microwave"], ["kettle"])),
 ]  # fmt: skip
 
 
@@ -267,6 +275,7 @@ REFUSALS = [
     # a task in a clause opened by "before" or "after" is a task too
     (SeveralTasksError, "Before watering the plant, sweep the floor", "'water': water_plants; 'sweep'"),
     (SeveralTasksError, "After opening the drawer, put the block in it", "'open': open_drawer, open_wine_bottle;"),
+    (SeveralTasksError, "I want the drawer opened and the block put in it", "'open': open_drawer"),
     (ContradictionError, "Put the bottle in the drawer without touching the bottle",
      "'bottle' is the object bottle_in_drawer acts on, and 'without touching' says to keep away from it"),
     (ContradictionError, "Pour the bowl into the pan and avoid the bowl", "'bowl' is the object bowl_pour acts on"),

@@ -49,7 +49,7 @@ NOT_OBJECTS = frozenset(
     yourself you me it them bit while moment second minute job task obstacle? way hour day night week weekend month
     year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact itself
     themselves vicinity surroundings none dear kitchen room house home lab office fortune favour favor look try
-    go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal""".split()
+    go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance""".split()
 ) - {"obstacle?"}
 # Units of distance: "the grinder 8 cm to the right of the pan" names a grinder.
 UNITS = frozenset(
@@ -360,12 +360,12 @@ _ADJECTIVES = frozenset(
     """open closed shut empty full dirty clean old new broken cracked upright fallen lying standing tipped wet dry
     hot cold warm heavy light glass paper iron rubber fragile delicate shiny dull round square flat tall short big
     small little large huge tiny long narrow wide nice pretty ugly spare extra same different whole half favourite
-    favorite usual neighbouring neighboring adjacent nearby""".split()
+    favorite usual neighbouring neighboring adjacent nearby safe good""".split()
 ) | MATERIALS
 
 
 # Adjectives that, said alone after an article, name a thing ("the iron", "a rubber", "a little light").
-_ADJECTIVES_ALSO_THINGS = frozenset("iron light rubber".split())
+_ADJECTIVES_ALSO_THINGS = frozenset("iron light rubber safe".split())
 _ARTICLES = frozenset("a an the this that my your our their his her".split())
 
 

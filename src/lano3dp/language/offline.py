@@ -193,6 +193,7 @@ _PASSIVE_MODALS = frozenset(
 _STATE_WORDS = frozenset("open shut closed upright".split())
 _KEEPING = frozenset("leave left leaving leaves keep kept keeping keeps found find".split())
 _WANTING = frozenset("need needs want wants get have like".split())  # "I need the bottle standing up"
+_WANTING_DONE = frozenset("need needs want wants like".split())  # "I'd like the drawer opened"
 _DISCOURSE = frozenset("actually anyway though however well instead rather sorry oops little one".split())
 _REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
 _STATE_ADVERBS = frozenset("all already still now just not almost nearly half wide".split())
@@ -717,7 +718,9 @@ class OfflineDecomposer:
                 tokens[k] in _CLAUSE_OPENERS or tuple(tokens[k - 1 : k + 1]) in _SEQUENCE_OPENERS
             ):
                 k -= 2 if tuple(tokens[k - 1 : k + 1]) in _SEQUENCE_OPENERS else 1
-            if k >= 0 and tokens[k] not in _TASK_BREAKS and tokens[k] not in _POLITE:
+            if k >= 0 and tokens[k] not in _TASK_BREAKS and tokens[k] not in _POLITE and not (
+                _after_wanted_object(tokens, position)
+            ):
                 continue  # not a clause's verb ("the drawer is open", "a glass of water")
             clauses.setdefault(clause_of[position], []).append((position, verb))
         counted: list[tuple[str, set[str]]] = []
@@ -1110,7 +1113,9 @@ class OfflineDecomposer:
             heads = {v for v in self._phrasal if v[0] in lemmas(word)}
             if not hits and not heads:
                 continue
-            if _past_form(word):
+            wanted_done = i >= 2 and task[i - 1].isalpha() and "NOUN" in word_classes(task[i - 1]) and any(
+                w in _WANTING_DONE for w in task[max(0, i - 6) : i - 1])  # "I want the drawer opened"
+            if _past_form(word) and not wanted_done:
                 continue  # "you stood the bottle up yesterday", "I spilled soil": what happened, not a request
             if word in _STATE_WORDS and i >= 2 and any(w in _KEEPING for w in task[max(0, i - 5) : i - 1]) and (
                 task[i - 1] not in _PERSONAL_PRONOUNS
@@ -1463,6 +1468,7 @@ class OfflineDecomposer:
                 not n.known and parse.tokens[n.end : n.end + 1] == ["'s"] and possessive(parse.tokens, n.end)
                 and parse.tokens[n.end + 1 : n.end + 2] in ([], *([w] for w in _SENTENCE_END), [","]))]
             before = [n for n in before if not predicate_noun(parse.tokens, n.index - 1)]  # "... was a gift"
+            before = [n for n in before if n.name not in _SURFACES]  # "my glasses are on the table, don't break them"
             others = [n for n in before if not any(_same_thing(skill, n, t) for t in targets)]
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)
@@ -1720,6 +1726,21 @@ def _with_shared_synonyms(registry: SkillRegistry) -> SkillRegistry:
         )
         for skill in registry
     )  # fmt: skip
+
+
+def _after_wanted_object(tokens: Sequence[str], position: int) -> bool:
+    """ "I want the drawer opened (and the block put in it)": a verb after the object of "want", or after a noun
+    phrase joined to it, is a task of its own."""
+    k = position - 1
+    if k < 0 or not (tokens[k].isalpha() and "NOUN" in word_classes(tokens[k])):
+        return False
+    while k >= 0 and tokens[k] not in _TASK_BREAKS and tokens[k] not in _WANTING_DONE and (
+        tokens[k] in DETERMINERS or tokens[k] in _MODIFIERS or tokens[k] in COLOURS
+        or tokens[k].isalpha() and "NOUN" in word_classes(tokens[k])
+    ):
+        k -= 1
+    wanted_before = any(w in _WANTING_DONE for w in tokens[:position])
+    return k >= 0 and wanted_before and (tokens[k] in _WANTING_DONE or tokens[k] in ("and", ","))
 
 
 def _running_count(words: Sequence[str], marks) -> list[int]:

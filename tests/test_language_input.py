@@ -129,6 +129,8 @@ TYPOS = [
     ("The drawer you must opne, please", "open_drawer(drawer)", "read 'opne' as 'open' (a typo?)"),
     # a verb no English dictionary has: a changed letter is a typo in a short word too (the blind table 14)
     ("sweap the dirt into the dustpan", "sweep_to_dustpan(broom, dustpan)", "read 'sweap' as 'sweep' (a typo?)"),
+    # a last letter typed twice, though "putt" is a word (three blind tables wrote it)
+    ("putt the block in the drawer", "put_item_in_drawer(block, drawer)", "read 'putt' as 'put' (a typo?)"),
 ]
 
 

@@ -63,8 +63,9 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_10.json", 120, 38, 119),  # first run 113/120 (score_blind.py), 115/120 (convention)
     ("instructions_blind_11.json", 143, 43, 143),  # first run 132/143 (score_blind.py), 137/143 (convention)
     ("instructions_blind_12.json", 149, 45, 147),  # first run 133/149 (score_blind.py), 140/149 (convention)
-    ("instructions_blind_13.json", 146, 42, 144),  # first run 133/146 (score_blind.py), 134/146 (convention)
-    ("instructions_blind_14.json", 145, 43, 143),  # first run 130/145 (score_blind.py), 134/145 (convention)
+    ("instructions_blind_13.json", 146, 42, 145),  # first run 133/146 (score_blind.py), 134/146 (convention)
+    ("instructions_blind_14.json", 145, 43, 144),  # first run 130/145 (score_blind.py), 134/145 (convention)
+    ("instructions_blind_15.json", 145, 42, 144),  # first run 138/145 (score_blind.py), 140/145 (convention)
 ])  # fmt: skip
 def test_later_blind_tables_keep_their_rates_and_stay_safe(table, rows, refusals, exact):
     score = score_table(DATA / table, OfflineDecomposer())

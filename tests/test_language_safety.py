@@ -196,6 +196,12 @@ DECLARED = [
     # what the user wants done to an object: "I want the drawer opened"
     ("I'd like the drawer opened", ("open_drawer", ["drawer"], [])),
     ("I need the microwave closed, mind the kettle", ("close_microwave", ["microwave"], ["kettle"])),
+    # found by the blind table 15: "don't knock any", an unknown compound said to be there, "don't get it wet"
+    ("Open the bottle, there are playing cards and chess pieces about so don't knock any",
+     ("open_wine_bottle", ["bottle"], ["playing card", "chess piece"])),
+    ("Water the plant on the left. The one on the right got water yesterday, so don't get it wet",
+     ("water_plants", ["watering can", "left plant"], ["right plant"])),
+    ("Water the plant but don't get the books wet", ("water_plants", ["watering can", "plant"], ["book"])),
 ]  # fmt: skip
 
 
@@ -235,6 +241,7 @@ PERMITTED = [
     "Put the block in the drawer. The spoon and the mug can both be touched.",  # found by the blind table 13
     "Put the block in the drawer, I don't care if you knock the mug",  # found by the blind table 14
     "Put the block in the drawer, I'm not bothered if the mug gets moved",
+    "Put the block in the drawer, the mug can get bumped, I don't care",  # found by the blind table 15
 ]
 
 

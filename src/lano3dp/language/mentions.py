@@ -102,6 +102,9 @@ _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
     ("if", "you", "must"), ("if", "you", "need", "to"), ("if", "needed"), ("if", "necessary"), ("contact", "ok"),
     ("contact", "okay"), ("contact", "fine"), ("contact", "allowed"), ("is", "permitted"), ("are", "permitted"),
     ("is", "acceptable"), ("are", "acceptable"), ("is", "tolerated"), ("are", "allowed"),
+    # "the bath mat can get bumped"
+    *((modal, "get", done) for modal in ("can", "may") for done in ("touched", "bumped", "moved", "pushed",
+                                                                    "knocked", "nudged", "brushed", "hit")),
 )  # fmt: skip
 _CLAUSE_END = frozenset(". ; : ! ? , but and then while".split())
 _CLAUSE_START = frozenset(", ; . : ! ? and then please also now just to you i kindly first next".split())
@@ -285,8 +288,12 @@ def object_mentions(
                 last_end = end
             i = max(end, i + 1)
             continue
-        if not length and tuple(words[i - 2 : i]) in _EXISTENTIAL and _plural_noun(word) and word not in verbs:
-            length = 1  # "there are paintbrushes and rulers": a plural said to be there names objects, known or not
+        if not length and tuple(words[i - 2 : i]) in _EXISTENTIAL and word not in verbs:
+            run_end = _noun_run(words, i, known, verbs)
+            if run_end > i and _plural_noun(words[run_end - 1]) and not any(
+                _known_at(words, k, known) for k in range(i, run_end)
+            ):  # a known word in it is read where it stands ("there are sharp knives")
+                length = run_end - i  # "there are paintbrushes", "there are playing cards": objects, known or not
         ambiguous = word in _AMBIGUOUS_BARE and not _bare_plural_noun(words, i) and not _bare_noun_said(words, i)
         if length and not ambiguous and word not in NOT_OBJECTS and not (word in verbs and previous in _CLAUSE_START):
             end = _noun_run(words, i, known, verbs)
@@ -504,7 +511,7 @@ def _verb_with_object(words: Sequence[str], i: int) -> bool:
     """words[i] is a verb of the third person with its object after it ("blocks the way", "knocks it")."""
     word = words[i]
     return word.endswith("s") and "VERB" in word_classes(word) and words[i + 1 : i + 2] != [] and (
-        words[i + 1] in _DETERMINERS or words[i + 1] in ("it", "them"))
+        words[i + 1] in _ARTICLES or words[i + 1] in ("it", "them", "its", "these", "those"))  # not "pieces all over"
 
 
 def _modal_can(words: Sequence[str], i: int) -> bool:

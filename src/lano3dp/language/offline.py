@@ -113,7 +113,8 @@ _TAGS = frozenset("none dear won't wouldn't isn't aren't".split())
 _NON_OBJECTS = _NON_OBJECTS | _TAGS
 _COLLISION_VERBS = frozenset(
     """touch hit bump knock disturb topple collide crash brush graze nudge move tip spill strike smash break
-    jostle upset rattle scrape scratch damage push shove bang clip snag contact run go come""".split()
+    jostle upset rattle scrape scratch damage push shove bang clip snag contact run go come splash soak drench
+    wet""".split()
 )
 # Places to set an object down that no skill puts things on.
 _SURFACES = frozenset("table counter countertop worktop floor ground side desk shelf surface".split())
@@ -193,6 +194,7 @@ _PASSIVE_MODALS = frozenset(
 _STATE_WORDS = frozenset("open shut closed upright".split())
 _KEEPING = frozenset("leave left leaving leaves keep kept keeping keeps found find".split())
 _WANTING = frozenset("need needs want wants get have like".split())  # "I need the bottle standing up"
+_STATES_AFTER = frozenset("wet dry hot cold open closed shut empty full dirty clean broken cracked upright".split())
 _WANTING_DONE = frozenset("need needs want wants like".split())  # "I'd like the drawer opened"
 _DISCOURSE = frozenset("actually anyway though however well instead rather sorry oops little one".split())
 _REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
@@ -218,6 +220,7 @@ _CUES: tuple[tuple[str, ...], ...] = (
     ("skip", "<det>"),  # "skip the red block and put the blue one in ...": left alone, so avoided
     ("not", "on", "<det>"), ("not", "in", "<det>"), ("not", "into", "<det>"), ("not", "onto", "<det>"),
     ("not", "inside", "<det>"),  # "on the white base, not on the black one": the other place is avoided
+    ("don't", "get"), ("dont", "get"), ("not", "get"), ("never", "get"),  # "don't get it wet"
     ("keep", "off"), ("stay", "off"), ("keeping", "off"), ("staying", "off"),
 )  # fmt: skip
 _CONTRASTS = frozenset({("not", "<det>"), ("but", "not"), ("and", "not")}) | {
@@ -1027,8 +1030,12 @@ class OfflineDecomposer:
             bare = bare[:-1]  # "don't knock it over"
         if len(bare) > 1 and bare[0] in ("it", "they", "them") and bare[1] not in ("and", "or"):
             bare = bare[:1]  # "the kettle, it just boiled", "none of them can be knocked": a clause about them
+        said = bare
+        if not bare and content in (("any",), ("either",)):
+            bare = ("them",)  # "there are cards and chess pieces about, so don't knock any": any of them
+            said = content
         if bare in _PRONOUNS:
-            parse.references.append(_Reference(index, _PRONOUNS[bare], f"{cue} {' '.join(bare)}".strip()))
+            parse.references.append(_Reference(index, _PRONOUNS[bare], f"{cue} {' '.join(said)}".strip()))
             return
         ref = self._chunk_to_ref(chunk)
         if ref is not None:
@@ -1069,6 +1076,8 @@ class OfflineDecomposer:
                 continue
             if nouns and word.isalpha() and word_classes(word) == {"ADV"}:
                 break  # "mind the lamp though": an adverb ends the noun phrase
+            if nouns and word in _STATES_AFTER:
+                break  # "don't get the books wet": a state said of the object after it
             # A function word straight after "the" is a noun after all ("the can").
             if word in _BOUNDARY and not after_determiner:
                 if nouns or vague:
@@ -1101,6 +1110,10 @@ class OfflineDecomposer:
         nouns = nouns[-_MAX_COMPOUND:]  # "the a b c d e f": no object's name is a run of words
         if not nouns or len(" ".join(nouns)) > MAX_NAME_CHARS:
             return None
+        if nouns == [nouns[0]] and nouns[0] not in OBJECT_NOUNS and (
+            "NOUN" not in word_classes(nouns[0]) and is_adjective(nouns[0]) or nouns[0] in _STATES_AFTER
+        ):
+            return None  # "don't get distracted", "must not get wet": a state alone names no object
         nouns[-1] = singular(nouns[-1])
         return ObjectRef(name=" ".join(nouns), color=color, size=size, position=position)
 
@@ -1468,7 +1481,8 @@ class OfflineDecomposer:
                 not n.known and parse.tokens[n.end : n.end + 1] == ["'s"] and possessive(parse.tokens, n.end)
                 and parse.tokens[n.end + 1 : n.end + 2] in ([], *([w] for w in _SENTENCE_END), [","]))]
             before = [n for n in before if not predicate_noun(parse.tokens, n.index - 1)]  # "... was a gift"
-            before = [n for n in before if n.name not in _SURFACES]  # "my glasses are on the table, don't break them"
+            # "my glasses are on the table, don't break them", "it got water yesterday, don't get it wet"
+            before = [n for n in before if n.name not in _SURFACES and n.name not in NOT_OBJECTS]
             others = [n for n in before if not any(_same_thing(skill, n, t) for t in targets)]
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)

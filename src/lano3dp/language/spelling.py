@@ -154,6 +154,8 @@ def correct_typos(
             # a real word that can be a verb is no typo there; "poor the bowl" is one. A word English lacks
             # ("sweap") is another word by no reading, so a changed letter is a typo in a short verb too
             choice = None if "VERB" in english else correct_word(word, verbs, substitution_from=7 if english else 4)
+            if choice is None and len(word) > 3 and word[-1] == word[-2] and word[:-1] in verb_set:
+                choice = word[:-1]  # "putt the block in": a last letter typed twice, though "putt" is a word
         else:
             choice = None
         if choice is not None:

@@ -137,6 +137,9 @@ def test_a_named_target_said_to_be_avoided_is_a_contradiction_refused(decomposer
         "'bottle' is said to be handled with care ('the bottle is fragile') and is the target bottle of "
         "bottle_in_drawer; it is not made an obstacle"
     ]
+    # "mind" said of a target asks for care too ("mind the pan's handle" while pouring into the pan)
+    plan = decomposer.decompose("Pour the bowl into the pan and mind the pan's handle")
+    assert (plan.skill, plan.target_phrases, plan.obstacles) == ("bowl_pour", ["bowl", "pan"], [])
 
 
 # ---- item 3: qualifiers --------------------------------------------------------------------

@@ -202,6 +202,10 @@ DECLARED = [
     ("Water the plant on the left. The one on the right got water yesterday, so don't get it wet",
      ("water_plants", ["watering can", "left plant"], ["right plant"])),
     ("Water the plant but don't get the books wet", ("water_plants", ["watering can", "plant"], ["book"])),
+    # what may happen is no request: "the water could spill"
+    ("Sweep the crumbs into the dustpan, the cat bowl's water could spill",
+     ("sweep_to_dustpan", ["broom", "dustpan"], ["cat bowl"])),
+    ("Put the block in the drawer and give the mug some space", ("put_item_in_drawer", ["block", "drawer"], ["mug"])),
 ]  # fmt: skip
 
 

@@ -175,7 +175,7 @@ _DESTINATIONS = frozenset("in into inside onto on".split())
 # contradiction ("pour the bowl, don't spill it"); "avoid" or "don't touch" said of a target is one.
 _CARE_WORDS = frozenset(
     """spill drop break damage scratch smash crack dent tip topple upset knock tilt shake crush fragile delicate
-    hot breakable sharp precious valuable wobbly unstable expensive careful caution gently""".split()
+    hot breakable sharp precious valuable wobbly unstable expensive careful caution gently mind""".split()
 )
 # Properties that declare the object they are said of an obstacle ("the glass is fragile").
 _PROPERTY_WORDS = frozenset("fragile delicate breakable hot sharp precious valuable wobbly unstable expensive".split())
@@ -195,6 +195,7 @@ _STATE_WORDS = frozenset("open shut closed upright".split())
 _KEEPING = frozenset("leave left leaving leaves keep kept keeping keeps found find".split())
 _WANTING = frozenset("need needs want wants get have like".split())  # "I need the bottle standing up"
 _STATES_AFTER = frozenset("wet dry hot cold open closed shut empty full dirty clean broken cracked upright".split())
+_MODALS_AFTER_SUBJECT = frozenset("could would can will might may should".split())
 _WANTING_DONE = frozenset("need needs want wants like".split())  # "I'd like the drawer opened"
 _DISCOURSE = frozenset("actually anyway though however well instead rather sorry oops little one".split())
 _REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
@@ -1130,6 +1131,8 @@ class OfflineDecomposer:
                 w in _WANTING_DONE for w in task[max(0, i - 6) : i - 1])  # "I want the drawer opened"
             if _past_form(word) and not wanted_done:
                 continue  # "you stood the bottle up yesterday", "I spilled soil": what happened, not a request
+            if _may_happen(task, i):
+                continue  # "the cat bowl's water could spill": what may happen, not a request
             if word in _STATE_WORDS and i >= 2 and any(w in _KEEPING for w in task[max(0, i - 5) : i - 1]) and (
                 task[i - 1] not in _PERSONAL_PRONOUNS
             ):
@@ -1740,6 +1743,13 @@ def _with_shared_synonyms(registry: SkillRegistry) -> SkillRegistry:
         )
         for skill in registry
     )  # fmt: skip
+
+
+def _may_happen(tokens: Sequence[str], i: int) -> bool:
+    """ "the water could spill", "the vase might break": a modal after a noun (its subject) says what may
+    happen; "could you ...", "you could ..." ask."""
+    return i >= 2 and tokens[i - 1] in _MODALS_AFTER_SUBJECT and tokens[i - 2].isalpha() and (
+        tokens[i - 2] not in _POLITE and "NOUN" in word_classes(tokens[i - 2]))
 
 
 def _after_wanted_object(tokens: Sequence[str], position: int) -> bool:

@@ -49,7 +49,8 @@ NOT_OBJECTS = frozenset(
     yourself you me it them bit while moment second minute job task obstacle? way hour day night week weekend month
     year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact itself
     themselves vicinity surroundings none dear kitchen room house home lab office fortune favour favor look try
-    go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space step""".split()
+    go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space
+    step""".split()
 ) - {"obstacle?"}
 # Units of distance: "the grinder 8 cm to the right of the pan" names a grinder.
 UNITS = frozenset(

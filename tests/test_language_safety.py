@@ -206,6 +206,17 @@ DECLARED = [
     ("Sweep the crumbs into the dustpan, the cat bowl's water could spill",
      ("sweep_to_dustpan", ["broom", "dustpan"], ["cat bowl"])),
     ("Put the block in the drawer and give the mug some space", ("put_item_in_drawer", ["block", "drawer"], ["mug"])),
+    # found by the blind table 16: an agent noun heads its compound, "theres" without its apostrophe, units of a
+    # substance, an object only said to be there weighs less than the task's own in choosing the skill
+    ("Open the desk drawer, the paper shredder is next to it", ("open_drawer", ["desk drawer"], ["paper shredder"])),
+    ("Put the bottle into the left drawer. theres a grey toy on the right, dont touch it",
+     ("bottle_in_drawer", ["bottle", "left drawer"], ["right grey toy"])),
+    ("Close the microwave, there are loaves of bread in front, go around them", ("close_microwave", ["microwave"],
+                                                                                ["loaf"])),
+    # a filler word after its article is a name the user gave; an unknown word alone after "the" is a noun
+    ("Avoid the rofl and open the drawer", ("open_drawer", ["drawer"], ["rofl"])),
+    ("Careful, there's a mug next to the drawer; put the babed in the drawer",
+     ("put_item_in_drawer", ["babed", "drawer"], ["mug"])),
 ]  # fmt: skip
 
 
@@ -246,6 +257,7 @@ PERMITTED = [
     "Put the block in the drawer, I don't care if you knock the mug",  # found by the blind table 14
     "Put the block in the drawer, I'm not bothered if the mug gets moved",
     "Put the block in the drawer, the mug can get bumped, I don't care",  # found by the blind table 15
+    "Put the block in the drawer, the mugs don't matter",  # found by the blind table 16
 ]
 
 
@@ -565,6 +577,8 @@ def test_property_every_object_word_in_any_role_is_a_target_or_an_obstacle(decom
         said = singular(corrected.get(word, word))
         if word in corrected and said in slot_words:
             continue  # read as a typo of a slot's word ("pabn" as "pan"): a target's name, not an unknown object
+        if word in corrected and item is not None and said == singular(corrected.get(item, item)):
+            continue  # "bagb" and "babg" both read as "bag": the typos name one object, the one carried
         assert said in target_words | obstacle_words, (instruction, plan.summary())
         assert said not in target_words, (instruction, plan.summary())  # avoided objects are never targets
     assert task_objects & target_words or {corrected.get(w, w) for w in task_objects} & target_words, (

@@ -95,6 +95,7 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
 )  # fmt: skip
 # Said after an object, permitting contact with it ("the mug can be moved", "the mug may be touched").
 _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
+    ("don't", "matter"), ("dont", "matter"), ("do", "not", "matter"),
     ("can", "be", "touched"), ("can", "be", "moved"), ("can", "be", "pushed"), ("may", "be", "touched"),
     ("may", "be", "moved"), ("may", "be", "pushed"), ("doesn't", "matter"), ("does", "not", "matter"),
     ("is", "fine"), ("is", "ok"), ("is", "okay"), ("is", "alright"), ("is", "allowed"), ("are", "fine"),
@@ -113,6 +114,7 @@ _COMPOUND_MODIFIERS = frozenset("water wine coffee tea glass".split())  # "water
 _DETACHABLE = frozenset("lid cap cork cover case stopper".split())
 _CONTAINERS_OF = frozenset(
     "bottle glass cup mug jar can bowl box bag bucket jug pitcher carafe flask pot pan tin".split()
+    + "loaf slice bar roll sheet".split()  # "loaves of bread", "a bar of soap": the unit is the object
 )
 
 
@@ -538,20 +540,24 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
         after = words[end] if end < len(words) else "."
         plural_head = len(rest) == 1 and singular(rest[0]) != rest[0] and "NOUN" in word_classes(singular(rest[0]))
         plural_head = plural_head and after in _AFTER_PLURAL_HEAD  # not "the drawer ends up open"
-        if not plural_head:  # "the toy cars", "the tape measures": a plural noun after a known one is the head
+        # "the paper shredder is next to it": an agent noun (a thing that does something) heads the compound
+        agent_head = len(rest) == 1 and rest[0].endswith(("er", "ers")) and "NOUN" in word_classes(
+            singular(rest[0])) and "VERB" not in word_classes(rest[0]) and not _not_object(rest[0])
+        if not plural_head and not agent_head:  # "the toy cars", "the tape measures": the plural noun is the head
             chunk = chunk[: max(known_ends)]  # "the mug holder" -> mug: the known noun is the head
     while chunk and _not_object(chunk[-1]) and not _known_at(chunk, len(chunk) - 1, known):
         if len(chunk) > 1 and chunk[-1] in _DETACHABLE:
             break  # "the pan lid": a lid comes off, so it is an object of its own
         chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
     while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
-        chunk[0] in NOT_OBJECTS and not known_ends or is_adjective(chunk[0])
-    ):
+        chunk[0] in NOT_OBJECTS and not known_ends or is_adjective(chunk[0]) and chunk[0] not in OBJECT_NOUNS
+    ):  # not "the paper shredder", "the glass jar": a thing's name before a noun names its kind
         chunk.pop(0)  # "the open drawer", "the fallen bottle", "the ceramic mug": the object is the noun
     # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)
     # a lone adjective names nothing ("they're both hot"; "a good robot" once "robot" is dropped)
-    material = len(chunk) == 1 and (chunk[0] in _ADJECTIVES or is_adjective(chunk[0])) and not _known_at(
-        chunk, 0, known)  # not "the glass"
+    # an adjective alone names nothing; a word no lexicon has, alone after its article, is a name ("the babed")
+    material = len(chunk) == 1 and (chunk[0] in _ADJECTIVES or bool(word_classes(chunk[0])) and is_adjective(
+        chunk[0])) and not _known_at(chunk, 0, known)  # not "the glass"
     # "the iron is next to it", "a little light near the drawer": a thing, said with its article
     material = material and not (chunk == words[j:end] and chunk[0] in _ADJECTIVES_ALSO_THINGS and any(
         w in _ARTICLES for w in words[i:j]))

@@ -255,6 +255,7 @@ def tokenize(text: str) -> list[str]:
     text = re.sub(r"\s[-–—]+\s|[–—]", " , ", text)  # a dash between words breaks the clause like a comma
     text = re.sub(r"\b(left|right)-hand(ed)?\b", r"\1", text.lower().replace("’", "'"))  # "the left-hand drawer"
     text = re.sub(r"\b([a-z]+s)'(?= [a-z])", r"\1's", text)  # "the kids' toys": a plural owner, as "the kid's toys"
+    text = re.sub(r"\b(there|here)s\b", r"\1's", text)  # "theres a mug": typed without the apostrophe
     for word in _WORD.findall(text):
         ending = next((e for e in _CLITICS if word.endswith(e) and len(word) > len(e)), None)
         words.extend([word[: -len(ending)], ending] if ending else [word])
@@ -487,7 +488,10 @@ class OfflineDecomposer:
         text = re.sub(r"\b(lay|laying|lays|put|putting) a finger on\b", lambda m: "touching" if m.group(1).endswith(
             "ing") else "touch", text, flags=re.IGNORECASE)  # an idiom of touching
         text = re.sub(r"\s*(?:->|=>|-->|→)\s*", " into ", text)  # "block -> drawer": shorthand for "into"
-        words = [_CHAT_WORDS.get(w, w) for w in tokenize(text) if w not in _FILLERS]
+        tokens = tokenize(text)
+        # a filler after a determiner is a noun the user named ("avoid the rofl"), never dropped
+        words = [_CHAT_WORDS.get(w, w) for k, w in enumerate(tokens)
+                 if w not in _FILLERS or k and tokens[k - 1] in DETERMINERS]
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         # a capitalised word inside a sentence is a name ("Sam, wait"), never a typo of a verb or an object
@@ -1112,7 +1116,8 @@ class OfflineDecomposer:
         if not nouns or len(" ".join(nouns)) > MAX_NAME_CHARS:
             return None
         if nouns == [nouns[0]] and nouns[0] not in OBJECT_NOUNS and (
-            "NOUN" not in word_classes(nouns[0]) and is_adjective(nouns[0]) or nouns[0] in _STATES_AFTER
+            word_classes(nouns[0]) and "NOUN" not in word_classes(nouns[0]) and is_adjective(nouns[0])
+            or nouns[0] in _STATES_AFTER
         ):
             return None  # "don't get distracted", "must not get wet": a state alone names no object
         nouns[-1] = singular(nouns[-1])
@@ -1332,8 +1337,11 @@ class OfflineDecomposer:
             score = 2.0 if skill.name in verb_skills else 0.0
             score += 0.5 if skill.name in phrasal_skills else 0.0  # "pull out" says more than "pull"
             assigned, unplaced = self._assign(skill, parse.nouns)
-            score += sum(0.5 if wildcard else 1.0 for _, wildcard in assigned.values())
-            score -= sum(1 for noun in unplaced if noun.known and not self._same_object(skill, noun, assigned))
+            # an object only said to be there ("there's a toy on the right") is weaker evidence than the task's own
+            score += sum((0.5 if wildcard else 1.0) * (1.0 if noun.in_task else 0.5) for noun, wildcard in
+                         assigned.values())
+            score -= sum(1.0 if noun.in_task else 0.5 for noun in unplaced
+                         if noun.known and not self._same_object(skill, noun, assigned))
             evidence[skill.name] = score
             # Ties go to the reading that leaves fewer objects implied ("set the bottle upright" needs no drawer).
             parse.scores[skill.name] = score - 0.25 * (len(skill.slots) - len(assigned))

@@ -58,7 +58,7 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_5.json", 120, 37, 120),
     ("instructions_blind_6.json", 120, 36, 120),  # first run 103/120 (score_blind.py), 108/120 (convention)
     ("instructions_blind_7.json", 120, 38, 115),  # first run 98/120 (both scorers)
-    ("instructions_blind_8.json", 120, 41, 110),  # first run 79/120 (score_blind.py), 82/120 (convention)
+    ("instructions_blind_8.json", 120, 41, 111),  # first run 79/120 (score_blind.py), 82/120 (convention)
     ("instructions_blind_9.json", 120, 38, 108),  # first run 75/120 (score_blind.py), 77/120 (convention)
     ("instructions_blind_10.json", 120, 38, 119),  # first run 113/120 (score_blind.py), 115/120 (convention)
     ("instructions_blind_11.json", 143, 43, 143),  # first run 132/143 (score_blind.py), 137/143 (convention)
@@ -66,6 +66,7 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_13.json", 146, 42, 145),  # first run 133/146 (score_blind.py), 134/146 (convention)
     ("instructions_blind_14.json", 145, 43, 144),  # first run 130/145 (score_blind.py), 134/145 (convention)
     ("instructions_blind_15.json", 145, 42, 144),  # first run 138/145 (score_blind.py), 140/145 (convention)
+    ("instructions_blind_16.json", 151, 41, 148),  # first run 135/151 (score_blind.py), 139/151 (convention)
 ])  # fmt: skip
 def test_later_blind_tables_keep_their_rates_and_stay_safe(table, rows, refusals, exact):
     score = score_table(DATA / table, OfflineDecomposer())

@@ -217,6 +217,14 @@ DECLARED = [
     ("Avoid the rofl and open the drawer", ("open_drawer", ["drawer"], ["rofl"])),
     ("Careful, there's a mug next to the drawer; put the babed in the drawer",
      ("put_item_in_drawer", ["babed", "drawer"], ["mug"])),
+    # a side said of "the bottle of wine" and before a state; an owner and a person who did something earlier
+    ("Open the bottle of wine on the left", ("open_wine_bottle", ["left bottle"], [])),
+    ("Stand the bottle on the right upright", ("bottle_upright", ["right bottle"], [])),
+    ("Sweep the dirt into the blue dustpan. The red dustpan belongs to my neighbour, keep off it.",
+     ("sweep_to_dustpan", ["broom", "blue dustpan"], ["red dustpan"])),
+    ("My son made a mess. Put the crayon in the drawer and go around the teddy bear",
+     ("put_item_in_drawer", ["crayon", "drawer"], ["teddy bear"])),
+    ("Put the block in the drawer, mind the baby", ("put_item_in_drawer", ["block", "drawer"], ["baby"])),
 ]  # fmt: skip
 
 
@@ -307,6 +315,7 @@ REFUSALS = [
     (NegatedCommandError, "Don't you dare put the phone on the base", "'don't you dare put the phone on the base'"),
     (NegatedCommandError, "I don't want you to sweep the dirt into the dustpan", "'don't want you to sweep"),
     (NegatedCommandError, "I don't want the bottle put in the drawer", "'don't want the bottle put in the drawer'"),
+    (NegatedCommandError, "Sweeping the dirt into the dustpan won't be necessary", "'sweeping the dirt into the"),
     (ContradictionError, "Stand the bottle upright while avoiding every bottle", "'bottle' is the object"),
     # verbs of abstaining negate the task verb after them
     (NegatedCommandError, "Refrain from opening the microwave door", "'refrain from opening the microwave door'"),

@@ -264,6 +264,10 @@ def object_mentions(
         if word in _SWEEP_VERBS and (words[i - 1] if i else ",") in _CLAUSE_START:
             i = _after_swept(words, i + 1, known, verbs)  # "sweep the sand ...": what is swept is no object
             continue
+        if tuple(words[i - 2 : i]) in _OWNED_BY:
+            i = _noun_run(words, max(i, *(k + 1 for k in range(i, min(i + 2, n)) if words[k] in _ARTICLES)), known,
+                          verbs)  # "the red dustpan belongs to my neighbour": the owner is no object
+            continue
         if last_end == i - 1 and predicate_noun(words, i):
             i = _noun_run(words, i + 1, known, verbs)  # "that vase was a wedding present": the vase again
             continue
@@ -273,6 +277,8 @@ def object_mentions(
                 j += 1
             end = _noun_run(words, j, known, verbs)
             found = _mention(words, i, j, end, known, permitted)
+            if found is not None and _person_who_did(found, words, end):
+                found = None  # "my son made a mess": who did something earlier is no object on the table
             if found is not None and not _possessor(words, j, end, known, verbs):
                 mentions.append(found)
                 last_end = end
@@ -508,6 +514,33 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
         else:
             break
     return end
+
+
+_OWNED_BY = frozenset({("belongs", "to"), ("belong", "to"), ("belonged", "to"), ("belonging", "to")})
+# People, as the subject of what they did ("my roommate knocked it over"); a person said to be near is avoided.
+_PEOPLE = frozenset(
+    """son daughter kid child children mom mum dad mother father brother sister wife husband partner roommate
+    flatmate housemate neighbour neighbor friend boss colleague grandma grandpa grandmother grandfather aunt uncle
+    cousin baby toddler guest visitor cleaner nanny teacher someone somebody everyone nobody""".split()
+)
+
+
+def named_in_passing(name: str, words: Sequence[str], start: int, end: int) -> bool:
+    """The noun phrase words[start:end] (naming `name`) names a person who did something ("my son made a
+    mess") or an owner ("it belongs to my neighbour"): no object on the table."""
+    owner = tuple(words[start - 2 : start]) in _OWNED_BY or (
+        tuple(words[start - 3 : start - 1]) in _OWNED_BY and words[start - 1] in _ARTICLES)
+    return owner or _person_who_did(Mention(name), words, end)
+
+
+def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
+    """ "my son made a mess", "my roommate has left it open": a person who did something is named in passing."""
+    if mention.head not in _PEOPLE and singular(mention.head) not in _PEOPLE:
+        return False
+    following = words[end : end + 2]
+    if following[:1] in (["has"], ["had"], ["have"]):
+        following = following[1:]
+    return bool(following) and following[0].isalpha() and _irregular_participle(following[0])
 
 
 def _verb_with_object(words: Sequence[str], i: int) -> bool:

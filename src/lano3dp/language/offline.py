@@ -60,6 +60,7 @@ from lano3dp.language.mentions import (
     Mention,
     enforce_mentions,
     is_adjective,
+    named_in_passing,
     names_another,
     object_mentions,
     permitted_spans,
@@ -195,6 +196,9 @@ _STATE_WORDS = frozenset("open shut closed upright".split())
 _KEEPING = frozenset("leave left leaving leaves keep kept keeping keeps found find".split())
 _WANTING = frozenset("need needs want wants get have like".split())  # "I need the bottle standing up"
 _STATES_AFTER = frozenset("wet dry hot cold open closed shut empty full dirty clean broken cracked upright".split())
+_UNITS_OF = frozenset("bottle glass cup mug jar can bowl box bag jug pot tin loaf bar".split())  # "a bottle of wine"
+_UNNEEDED = frozenset("necessary needed required".split())  # "... won't be necessary"
+_NOT_NEEDED = frozenset("not isn't won't wont no never".split())
 _MODALS_AFTER_SUBJECT = frozenset("could would can will might may should".split())
 _WANTING_DONE = frozenset("need needs want wants like".split())  # "I'd like the drawer opened"
 _DISCOURSE = frozenset("actually anyway though however well instead rather sorry oops little one".split())
@@ -644,6 +648,7 @@ class OfflineDecomposer:
         """ "don't open the drawer", "never pour ...", "do not put ...": a negated task clause is no task. Its
         words become clause breaks (its objects stay mentions, so they are avoided). A negated collision verb
         ("don't move the mug") is an obstacle cue instead, unless it says where to ("don't move it into ...")."""
+        self._mask_unneeded(words, parse)
         for i, word in enumerate(words):
             if word in _ABSTAIN_VERBS and i and words[i - 1] in _NEGATORS | {"not"}:
                 continue  # "don't forget to close it", "never stop ...": two negations ask for the task
@@ -687,6 +692,20 @@ class OfflineDecomposer:
             parse.negated_verbs.extend((verb, said_of) for verb in sorted(forms & self._single_verbs))
             for k in range(start, end):
                 words[k] = ","
+
+    def _mask_unneeded(self, words: list[str], parse: Parse) -> None:
+        """ "sweeping the dirt won't be necessary", "opening the drawer isn't needed": a task said to be
+        unneeded is a negated command."""
+        for i, word in enumerate(words):
+            if not (word.endswith("ing") and self._is_task_verb(word)) or i and words[i - 1] not in _TASK_BREAKS:
+                continue
+            end = i + 1
+            while end < len(words) and words[end] not in _SENTENCE_END and words[end - 1] not in _UNNEEDED:
+                end += 1
+            said = words[i:end]
+            if said[-1] in _UNNEEDED and _NOT_NEEDED & set(said):
+                parse.negated.append(" ".join(said))
+                words[i:end] = [","] * (end - i)
 
     def _is_task_verb(self, word: str) -> bool:
         forms = lemmas(word)
@@ -1493,7 +1512,8 @@ class OfflineDecomposer:
                 and parse.tokens[n.end + 1 : n.end + 2] in ([], *([w] for w in _SENTENCE_END), [","]))]
             before = [n for n in before if not predicate_noun(parse.tokens, n.index - 1)]  # "... was a gift"
             # "my glasses are on the table, don't break them", "it got water yesterday, don't get it wet"
-            before = [n for n in before if n.name not in _SURFACES and n.name not in NOT_OBJECTS]
+            before = [n for n in before if n.name not in _SURFACES and n.name not in NOT_OBJECTS
+                      and not named_in_passing(n.name, parse.tokens, n.index, n.end)]  # "belongs to my neighbour"
             others = [n for n in before if not any(_same_thing(skill, n, t) for t in targets)]
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)
@@ -2067,13 +2087,17 @@ def _front_positions(words: list[str]) -> list[str]:
             continue
         following = out[i + len(post)] if i + len(post) < len(out) else ","
         if following.isalpha() and following not in _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS and (
-            "NOUN" in word_classes(following)
-        ):  # not "the pan on the left stays untouched": a verb after its subject
+            following not in _STATES_AFTER and "NOUN" in word_classes(following)
+        ):  # not "the pan on the left stays untouched", "the bottle on the right upright": said of the phrase
             i += 1  # "in the middle drawer": the position word is said of the noun after it
             continue
         start = i - 1
         while start > 0 and out[start - 1] not in DETERMINERS and out[start - 1] not in _BOUNDARY | _SENTENCE_END:
             start -= 1
+        if start >= 3 and out[start - 1] == "of" and singular(out[start - 2]) in _UNITS_OF:
+            start -= 2  # "the bottle of wine on the left": the side is said of the bottle
+            while start > 0 and out[start - 1] not in DETERMINERS and out[start - 1] not in _BOUNDARY | _SENTENCE_END:
+                start -= 1
         if start == 0 or out[start - 1] not in DETERMINERS:
             i += 1
             continue

@@ -225,6 +225,7 @@ DECLARED = [
     ("My son made a mess. Put the crayon in the drawer and go around the teddy bear",
      ("put_item_in_drawer", ["crayon", "drawer"], ["teddy bear"])),
     ("Put the block in the drawer, mind the baby", ("put_item_in_drawer", ["block", "drawer"], ["baby"])),
+    ("Put the phone on the base, the cable can stay where it is", ("phone_on_base", ["phone", "base"], ["cable"])),
 ]  # fmt: skip
 
 
@@ -266,6 +267,10 @@ PERMITTED = [
     "Put the block in the drawer, I'm not bothered if the mug gets moved",
     "Put the block in the drawer, the mug can get bumped, I don't care",  # found by the blind table 15
     "Put the block in the drawer, the mugs don't matter",  # found by the blind table 16
+    "Put the block in the drawer, no need to be careful with the mug",
+    "Put the block in the drawer, the mug is tough, bump it all you like",
+    "Put the block in the drawer, knocking the mug is no big deal",
+    "Put the block in the drawer, it's not a big deal if the mug moves",
 ]
 
 

@@ -89,6 +89,7 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("can", "brush"), ("may", "nudge"), ("can", "nudge"), ("fine", "if"), ("ok", "if"), ("okay", "if"),
     ("alright", "if"), ("matter", "if"), ("no", "problem", "if"), ("not", "a", "problem", "if"),
     ("no", "worries", "if"), ("don't", "mind"), ("dont", "mind"), ("do", "not", "mind"),
+    ("no", "need", "to", "be", "careful"), ("not", "a", "big", "deal", "if"), ("no", "big", "deal", "if"),
     ("don't", "care", "if"), ("dont", "care", "if"), ("do", "not", "care", "if"), ("don't", "care", "about"),
     ("dont", "care", "about"), ("not", "bothered", "if"), ("not", "bothered", "about"), ("not", "fussed", "if"),
     ("not", "fussed", "about"),
@@ -104,6 +105,8 @@ _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
     ("if", "you", "must"), ("if", "you", "need", "to"), ("if", "needed"), ("if", "necessary"), ("contact", "ok"),
     ("contact", "okay"), ("contact", "fine"), ("contact", "allowed"), ("is", "permitted"), ("are", "permitted"),
     ("is", "acceptable"), ("are", "acceptable"), ("is", "tolerated"), ("are", "allowed"),
+    ("all", "you", "like"), ("all", "you", "want"), ("is", "no", "big", "deal"), ("'s", "no", "big", "deal"),
+    ("is", "not", "a", "big", "deal"), ("'s", "not", "a", "big", "deal"),
     # "the bath mat can get bumped"
     *((modal, "get", done) for modal in ("can", "may") for done in ("touched", "bumped", "moved", "pushed",
                                                                     "knocked", "nudged", "brushed", "hit")),
@@ -553,7 +556,8 @@ def _verb_with_object(words: Sequence[str], i: int) -> bool:
 def _modal_can(words: Sequence[str], i: int) -> bool:
     """ "can" at `i` is the modal verb ("the mug can be moved", "can both be touched"), not "the tin can"."""
     following = words[i + 1] if i + 1 < len(words) else "."
-    if following in ("be", "you", "i", "we", "not", "now", "both", "all", "also", "still", "safely", "easily"):
+    if following in ("be", "you", "i", "we", "not", "now", "both", "all", "also", "still", "safely", "easily", "stay",
+                     "go", "move", "get", "remain", "fall", "break", "tip", "stand", "sit", "touch"):
         return True
     classes = word_classes(following) if following.isalpha() else frozenset()
     base_verb = "VERB" in classes and not following.endswith("s")  # "can go", not "the paint can sits"

@@ -107,7 +107,8 @@ _BOUNDARY = frozenset(
 _NON_OBJECTS = frozenset(
     """left right side top bottom middle front back edge corner table counter way time contents content
     water liquid soup stuff one ones area spot place workspace dirt dust crumb crumbs trash mess debris
-    cork lid door what thing everything something nothing anything robot okay ok sure bit path route""".split()
+    cork lid door what thing everything something nothing anything robot okay ok sure bit path route deal problem
+    idea chance mistake distance space""".split()
 ) | UNITS
 # Said where an object could be, naming none: "obstacles: none", "be a dear", "..., won't you?"
 _TAGS = frozenset("none dear won't wouldn't isn't aren't".split())

@@ -226,6 +226,9 @@ DECLARED = [
      ("put_item_in_drawer", ["crayon", "drawer"], ["teddy bear"])),
     ("Put the block in the drawer, mind the baby", ("put_item_in_drawer", ["block", "drawer"], ["baby"])),
     ("Put the phone on the base, the cable can stay where it is", ("phone_on_base", ["phone", "base"], ["cable"])),
+    # "one" is read before the mentions, so the contrasted object is named; "whichever" is a determiner
+    ("Pour the red bowl into the pan, leave the green one", ("bowl_pour", ["red bowl", "pan"], ["green bowl"])),
+    ("Pour whichever bowl is nearest into the pan", ("bowl_pour", ["bowl", "pan"], [])),
 ]  # fmt: skip
 
 

@@ -85,7 +85,7 @@ _SENTENCE_END = frozenset(".;:!?")
 _CLITICS = ("'s", "'re", "'m", "'ve", "'ll", "'d")  # "they're" -> they 're: the pronoun stays a pronoun
 DETERMINERS = frozenset(
     """the a an this that these those its my your our their his her some any another both either each every
-    all two three four few several""".split()
+    all two three four few several whichever""".split()
 )
 # Position words, kept as said; like colours they narrow which instance is meant ("the top drawer").
 POSITION_WORDS = {
@@ -507,8 +507,8 @@ class OfflineDecomposer:
         words = _front_positions(_declared_placements(_contact_cues(words)))
         words, shorthand = self._shorthand_placements(words, vocabulary)
         read_as += shorthand
+        words = self._resolve_one_anaphora(words, vocabulary)  # first: "leave the green one" names a green bowl
         mentions = object_mentions(words, [*self._vocabulary, *scene_kinds], self._single_verbs)
-        words = self._resolve_one_anaphora(words, vocabulary)
         parse = Parse(tokens=list(words), warnings=[*normalized.warnings, *read_as], mentions=mentions)
         self._mask_negated(words, parse)
         task_mask = [True] * len(words)

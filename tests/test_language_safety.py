@@ -229,6 +229,10 @@ DECLARED = [
     # "one" is read before the mentions, so the contrasted object is named; "whichever" is a determiner
     ("Pour the red bowl into the pan, leave the green one", ("bowl_pour", ["red bowl", "pan"], ["green bowl"])),
     ("Pour whichever bowl is nearest into the pan", ("bowl_pour", ["bowl", "pan"], [])),
+    # the robot's own body is no object; a verb with its particle after a noun names nothing
+    ("Push the microwave door closed with your elbow", ("close_microwave", ["microwave"], [])),
+    ("Close the microwave but watch out, the kettle's spout sticks out", ("close_microwave", ["microwave"],
+                                                                         ["kettle"])),
 ]  # fmt: skip
 
 

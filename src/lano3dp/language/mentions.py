@@ -278,6 +278,9 @@ def object_mentions(
             j = i
             while j < n and (words[j] in _DETERMINERS or words[j] in _MODIFIERS or possessive(words, j)):
                 j += 1
+            if j > i and j < n and words[j] in verbs and all(w in _POSITIONS for w in words[i:j]):
+                i = j  # "but first move the mug": an adverb of order before a verb, not "the first move"
+                continue
             end = _noun_run(words, j, known, verbs)
             found = _mention(words, i, j, end, known, permitted)
             if found is not None and _person_who_did(found, words, end):
@@ -547,10 +550,12 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
 
 
 def _verb_with_object(words: Sequence[str], i: int) -> bool:
-    """words[i] is a verb of the third person with its object after it ("blocks the way", "knocks it")."""
+    """words[i] is a verb of the third person with its object or particle after it ("blocks the way", "knocks
+    it", "sticks out")."""
     word = words[i]
     return word.endswith("s") and "VERB" in word_classes(word) and words[i + 1 : i + 2] != [] and (
-        words[i + 1] in _ARTICLES or words[i + 1] in ("it", "them", "its", "these", "those"))  # not "pieces all over"
+        words[i + 1] in _ARTICLES or words[i + 1] in ("it", "them", "its", "these", "those", "out", "up")
+    )  # not "pieces all over"
 
 
 def _modal_can(words: Sequence[str], i: int) -> bool:

@@ -121,7 +121,10 @@ _COLLISION_VERBS = frozenset(
 # Places to set an object down that no skill puts things on.
 _SURFACES = frozenset("table counter countertop worktop floor ground side desk shelf surface".split())
 _PLACEMENT_MODALS = frozenset("needs need has have to should must can will ought".split())
-_OWN_BODY = frozenset("your the its my gripper grippers hand hands arm arms fingers yourself robot".split())
+_ROBOT_PARTS = frozenset("gripper grippers hand hands arm arms finger fingers elbow wrist claw".split())
+_OWN_BODY = frozenset(
+    "your the its my gripper grippers hand hands arm arms fingers yourself robot elbow wrist claw".split()
+)
 _PHRASE_ENDS = frozenset(", and or from to near next beside away inside".split())
 # What may follow a plural noun that heads a compound with a known object word ("toy cars all over the place").
 _AFTER_PLURAL_HEAD = _PHRASE_ENDS | frozenset("all around everywhere nearby are must have on in by".split())
@@ -2059,6 +2062,11 @@ def _own_body(words: list[str]) -> list[str]:
         if words[i] == "never" and words[i + 1 : i + 2] == ["mind"] and not gerund:
             out.append("ignore")
             i += 2
+            continue
+        if words[i] == "with" and words[i + 1 : i + 2] in (["your"], ["its"]) and words[i + 2 : i + 3] and (
+            words[i + 2] in _ROBOT_PARTS
+        ):
+            i += 3  # "push it closed with your elbow": the robot's own body is no object
             continue
         out.append(words[i])
         if words[i] in ("keep", "keeping", "stay", "hold"):

@@ -162,6 +162,7 @@ EVERYDAY = [
     ("pop the block in the drawer", "put_item_in_drawer(block, drawer)", "read 'pop ... in' as 'put ... in'"),
     ("stick the phone on its base", "phone_on_base(phone, base)", "read 'stick ... on' as 'put ... on'"),
     ("chuck the block into the drawer", "put_item_in_drawer(block, drawer)", "read 'chuck ... into' as 'put ... into'"),
+    ("park the phone on the dock", "phone_on_base(phone, base)", "read 'park ... on' as 'put ... on'"),
     ("give the plant a drink", "water_plants(watering can, plant)", "read 'give ... drink' as 'water ... drink'"),
     ("shut the microwave", "close_microwave(microwave)", None),
 ]

@@ -233,6 +233,23 @@ DECLARED = [
     ("Push the microwave door closed with your elbow", ("close_microwave", ["microwave"], [])),
     ("Close the microwave but watch out, the kettle's spout sticks out", ("close_microwave", ["microwave"],
                                                                          ["kettle"])),
+    # found by the blind table 17: a lexicon verb or holder heading a compound, a state verb after the subject,
+    # a participle after the noun, a number before it, where things stand ("crowded around", "sits between")
+    ("Open the bottle, the chess set is laid out right next to it", ("open_wine_bottle", ["bottle"], ["chess set"])),
+    ("The dustpan sits between the dog bed and the umbrella stand. Sweep the crumbs into the dustpan",
+     ("sweep_to_dustpan", ["broom", "dustpan"], ["dog bed", "umbrella stand"])),
+    ("Put the phone on the base; the purple lamp at the back wobbles", ("phone_on_base", ["phone", "base"],
+                                                                        ["back purple lamp"])),
+    ("Open the bottle but mind the five wine glasses lined up behind it", ("open_wine_bottle", ["bottle"],
+                                                                           ["wine glass"])),
+    ("Three monitors are crowded around the microwave. Close the microwave without hitting any of them",
+     ("close_microwave", ["microwave"], ["monitor"])),
+    ("Dock the phone. Some loose screws are lying around, don't scatter them", ("phone_on_base", ["phone", "base"],
+                                                                                ["screw"])),
+    ("Slide the drawer out gently, the pill organiser sits right on top of it", ("open_drawer", ["drawer"],
+                                                                                 ["pill organiser"])),
+    ("Water the cactus. The frog can be touched, the wind chime can't", ("water_plants", ["watering can", "plant"],
+                                                                          ["wind chime"])),
 ]  # fmt: skip
 
 
@@ -329,6 +346,7 @@ REFUSALS = [
     (NegatedCommandError, "I don't want the bottle put in the drawer", "'don't want the bottle put in the drawer'"),
     (NegatedCommandError, "Sweeping the dirt into the dustpan won't be necessary", "'sweeping the dirt into the"),
     (ContradictionError, "Stand the bottle upright while avoiding every bottle", "'bottle' is the object"),
+    (ContradictionError, "Set the green bottle upright but keep away from every single bottle", "'green bottle'"),
     # verbs of abstaining negate the task verb after them
     (NegatedCommandError, "Refrain from opening the microwave door", "'refrain from opening the microwave door'"),
     (NegatedCommandError, "There's no need to water the plant", "'no need to water the plant' asks the robot"),

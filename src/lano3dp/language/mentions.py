@@ -65,7 +65,8 @@ _BOUNDARY = frozenset(
     again too there here it them is are be was were can could would will should if when before after until as
     not don't dont do does very now just also still nearby close somewhere between against past beyond below
     above beneath underneath along than like i you we they he she me us sits sit stands stand lies lie rests
-    looks look seems seem appears has have had holds contains 's must might may""".split()
+    looks look seems seem appears has have had holds contains 's must might may can't cannot won't mustn't
+    shouldn't""".split()
 )
 # Object words that are also verbs or function words: without a determiner they are not read as objects.
 _AMBIGUOUS_BARE = frozenset(
@@ -75,8 +76,8 @@ _AMBIGUOUS_BARE = frozenset(
 )
 # Verbs said right after their subject: they end its noun phrase ("the sextant stays put", "the vase looks old").
 SUBJECT_VERBS = frozenset(
-    "looks seems appears contains holds has have had stays remains sits stands lies belongs needs goes got gets"
-    .split()
+    """looks seems appears contains holds has have had stays remains sits stands lies belongs needs goes got gets
+    wobbles rattles leaks drips tips breaks spills falls sticks squeaks topples""".split()
 )
 # Phrases that permit contact with what follows them, up to the end of the clause.
 _PERMISSIONS: tuple[tuple[str, ...], ...] = (
@@ -382,7 +383,7 @@ _ADJECTIVES = frozenset(
     """open closed shut empty full dirty clean old new broken cracked upright fallen lying standing tipped wet dry
     hot cold warm heavy light glass paper iron rubber fragile delicate shiny dull round square flat tall short big
     small little large huge tiny long narrow wide nice pretty ugly spare extra same different whole half favourite
-    favorite usual neighbouring neighboring adjacent nearby safe good""".split()
+    favorite usual neighbouring neighboring adjacent nearby safe good single""".split()
 ) | MATERIALS
 
 
@@ -499,6 +500,9 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
         more = _known_at(words, end, known)
         if word == "can" and _modal_can(words, end):
             break  # "the mug can be moved", "the mitt can both be touched": a modal verb
+        if word in _HOLDERS and end > j and words[end + 1 : end + 2] in [*_SENTENCE_ENDS, [","], ["and"]]:
+            end += 1  # "the umbrella stand.": a holder heads the compound, though "stand" is also a verb
+            continue
         if end > j and _verb_with_object(words, end):
             break  # "the mug blocks the way", "the cat knocks it": the verb after its subject, with its object
         if more:
@@ -510,10 +514,14 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             and word not in _BOUNDARY
             and word not in _DETERMINERS
             and word not in _MODIFIERS
-            and (word not in verbs or end == j)
+            and (word not in verbs or end == j or words[end + 1 : end + 2] in _BEFORE_A_MODAL + _SENTENCE_ENDS)
+            # a verb's word heads a compound before "is" or a full stop: "the chess set is", "the umbrella stand."
             and not word.endswith("ly")
-            and not (end > j and (word.endswith(("ing", "ed")) or word in SUBJECT_VERBS))
-            and not (end > j and word_classes(word) and "NOUN" not in word_classes(word))  # "the guests arrive"
+            and not (end > j and (word.endswith("ing") or word.endswith("ed") and _irregular_participle(word)
+                                  or word in SUBJECT_VERBS))  # "the mug used ...", not "the dog bed"
+            and not (end > j and word in _PLURAL_SUBJECT_VERBS and singular(words[end - 1]) != words[end - 1])
+            and not (end > j and word_classes(word) and "NOUN" not in word_classes(word)
+                     and words[end + 1 : end + 2] not in _BEFORE_A_MODAL)  # "the guests arrive"; "the wind chime can't"
             and end - j < 3
         ):
             end += 1
@@ -547,6 +555,15 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
     if following[:1] in (["has"], ["had"], ["have"]):
         following = following[1:]
     return bool(following) and following[0].isalpha() and _irregular_participle(following[0])
+
+
+_BEFORE_A_MODAL = [[w] for w in "can can't cannot must mustn't should shouldn't is are won't will may".split()]
+_SENTENCE_ENDS = [[], ["."], [";"], ["!"]]
+_HOLDERS = frozenset("stand rack holder tray mat stool basket bed".split())
+# Verbs said right after a plural subject ("the drumsticks need to stay", "the cups look fragile").
+_PLURAL_SUBJECT_VERBS = frozenset(
+    "look seem appear contain hold stay remain sit stand lie belong need go wobble rattle leak tip break fall".split()
+)
 
 
 def _verb_with_object(words: Sequence[str], i: int) -> bool:
@@ -585,6 +602,8 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
         # "the paper shredder is next to it": an agent noun (a thing that does something) heads the compound
         agent_head = len(rest) == 1 and rest[0].endswith(("er", "ers")) and "NOUN" in word_classes(
             singular(rest[0])) and "VERB" not in word_classes(rest[0]) and not _not_object(rest[0])
+        # "the umbrella stand", "the mug rack": what holds a known thing is named by both, and is the holder
+        agent_head = agent_head or len(rest) == 1 and singular(rest[0]) in _HOLDERS
         if not plural_head and not agent_head:  # "the toy cars", "the tape measures": the plural noun is the head
             chunk = chunk[: max(known_ends)]  # "the mug holder" -> mug: the known noun is the head
     while chunk and _not_object(chunk[-1]) and not _known_at(chunk, len(chunk) - 1, known):

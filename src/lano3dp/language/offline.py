@@ -85,7 +85,7 @@ _SENTENCE_END = frozenset(".;:!?")
 _CLITICS = ("'s", "'re", "'m", "'ve", "'ll", "'d")  # "they're" -> they 're: the pronoun stays a pronoun
 DETERMINERS = frozenset(
     """the a an this that these those its my your our their his her some any another both either each every
-    all two three four few several whichever""".split()
+    all two three four five six seven eight nine ten few several whichever""".split()
 )
 # Position words, kept as said; like colours they narrow which instance is meant ("the top drawer").
 POSITION_WORDS = {
@@ -101,7 +101,8 @@ _BOUNDARY = frozenset(
     off away back for using toward towards across through around while and or but then so that which who
     please again too there here it them is are be was were can could would will should must shall might if when
     before 's
-    after until as not don't do does very now just also still nearby close somewhere past 're 'm 've 'll 'd""".split()
+    after until as not don't do does very now just also still nearby close somewhere past 're 'm 've 'll 'd can't
+    cannot won't mustn't shouldn't""".split()
 )
 # Nouns that never name an object to look at.
 _NON_OBJECTS = frozenset(
@@ -116,7 +117,7 @@ _NON_OBJECTS = _NON_OBJECTS | _TAGS
 _COLLISION_VERBS = frozenset(
     """touch hit bump knock disturb topple collide crash brush graze nudge move tip spill strike smash break
     jostle upset rattle scrape scratch damage push shove bang clip snag contact run go come splash soak drench
-    wet""".split()
+    wet scatter displace dislodge budge shift crush squash dent ruin wreck""".split()
 )
 # Places to set an object down that no skill puts things on.
 _SURFACES = frozenset("table counter countertop worktop floor ground side desk shelf surface".split())
@@ -842,6 +843,10 @@ class OfflineDecomposer:
             cue = next((c for c in _CUES if self._cue_at(words, i, c)), None)
             if cue is not None and cue[0] == "mind" and i and words[i - 1] in ("don't", "dont", "not"):
                 cue = None  # "I don't mind if you brush the boxes": a permission (`mentions`), not a caution
+            if cue == ("around",) and i and (words[i - 1] in _COPULAS or words[i - 1] in _STANCE or (
+                words[i - 1].endswith("ed") and words[i - 1] not in ("steered", "navigated", "moved", "worked")
+            )):
+                cue = None  # "three monitors are crowded around the microwave": where they are, not a caution
             if cue is None:
                 i += 1
                 continue
@@ -934,7 +939,7 @@ class OfflineDecomposer:
                 start, end = self._subject_before(words, i)
                 there = start >= 2 and words[start - 1] in _COPULAS and words[start - 2] == "there"
                 if start < end and (words[i - 1] in _COPULAS or there):
-                    spans.append((start, end, start, i, " ".join(words[start:i])))
+                    spans.append((start, end, start, i, " ".join(words[start : i + 1])))
             elif words[i] in _WARNINGS and words[i + 1 : i + 2] and words[i + 1] in {",", ":", "!", "-"}:
                 # "careful, the can is right beside the pan": what a warning is about is an obstacle
                 k = i + 2
@@ -1106,6 +1111,8 @@ class OfflineDecomposer:
                 break  # "mind the lamp though": an adverb ends the noun phrase
             if nouns and word in _STATES_AFTER:
                 break  # "don't get the books wet": a state said of the object after it
+            if nouns and word.endswith("ed") and word_classes(word) and "NOUN" not in word_classes(word):
+                break  # "the wine glasses lined up behind it": a participle after the noun
             # A function word straight after "the" is a noun after all ("the can").
             if word in _BOUNDARY and not after_determiner:
                 if nouns or vague:
@@ -1115,6 +1122,8 @@ class OfflineDecomposer:
                 if nouns:
                     break  # "the teacup its my favourite": a second determiner starts another phrase
                 continue
+            if word == "single" and not nouns and chunk[k - 1 : k] and chunk[k - 1] in ("every", "each", "any"):
+                continue  # "every single bottle" is every bottle
             if word in _PERSONAL_PRONOUNS or word.isdigit():
                 break  # "I want that you put ...": "that" is a conjunction, "you" no object; "the abacus 12 cm ..."
             if not nouns and word in _RELATIONAL_ADJECTIVES:
@@ -1361,9 +1370,9 @@ class OfflineDecomposer:
             score += 0.5 if skill.name in phrasal_skills else 0.0  # "pull out" says more than "pull"
             assigned, unplaced = self._assign(skill, parse.nouns)
             # an object only said to be there ("there's a toy on the right") is weaker evidence than the task's own
-            score += sum((0.5 if wildcard else 1.0) * (1.0 if noun.in_task else 0.5) for noun, wildcard in
+            score += sum((0.5 if wildcard else 1.0) * self._weight(noun, parse) for noun, wildcard in
                          assigned.values())
-            score -= sum(1.0 if noun.in_task else 0.5 for noun in unplaced
+            score -= sum(self._weight(noun, parse) for noun in unplaced
                          if noun.known and not self._same_object(skill, noun, assigned))
             evidence[skill.name] = score
             # Ties go to the reading that leaves fewer objects implied ("set the bottle upright" needs no drawer).
@@ -1497,6 +1506,13 @@ class OfflineDecomposer:
         return assigned, free
 
     @staticmethod
+    def _weight(noun: _Noun, parse: Parse) -> float:
+        """How much a noun says about the skill: half for one only said to be somewhere ("there's a toy on the
+        right", "the pill organiser sits on top of it")."""
+        located = any(w in SUBJECT_VERBS or w in _STANCE for w in parse.tokens[noun.index : noun.end + 1])
+        return 1.0 if noun.in_task and not located else 0.5
+
+    @staticmethod
     def _same_object(skill: SkillSpec, noun: _Noun, assigned: dict[int, tuple[_Noun, bool]]) -> bool:
         """A leftover noun that names an already filled slot again ("the bottle of wine")."""
         return any(skill.slots[k].matches(noun.name) for k in assigned)
@@ -1622,6 +1638,8 @@ class OfflineDecomposer:
                 kept.append(obstacle)
                 continue
             cue = parse.cue_of.get(obstacle, "")
+            if "between" in cue.split():
+                continue  # "the dustpan sits between the dog bed and the stand": where the target is, no caution
             if not _is_care(cue):
                 raise ContradictionError(
                     instruction,
@@ -2097,7 +2115,8 @@ def _front_positions(words: list[str]) -> list[str]:
         following = out[i + len(post)] if i + len(post) < len(out) else ","
         if following.isalpha() and following not in _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS and (
             following not in _STATES_AFTER and "NOUN" in word_classes(following)
-        ):  # not "the pan on the left stays untouched", "the bottle on the right upright": said of the phrase
+            and not (following.endswith("s") and "VERB" in word_classes(following))
+        ):  # not "the pan on the left stays untouched", "the lamp at the back wobbles", "... upright"
             i += 1  # "in the middle drawer": the position word is said of the noun after it
             continue
         start = i - 1

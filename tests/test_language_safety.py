@@ -250,6 +250,7 @@ DECLARED = [
                                                                                  ["pill organiser"])),
     ("Water the cactus. The frog can be touched, the wind chime can't", ("water_plants", ["watering can", "plant"],
                                                                           ["wind chime"])),
+    ("pls water da plant, mind teh lamp", ("water_plants", ["watering can", "plant"], ["lamp"])),  # chat spellings
 ]  # fmt: skip
 
 

@@ -150,7 +150,7 @@ _POLITE = frozenset(
 # Hesitations and chat shorthand: no word of the task ("don't hit the lamp lol" names a lamp)
 _FILLERS = frozenset("um umm uh uhm er erm hmm lol lmao rofl thx ty pls plz rn btw tbh idk omg".split())
 _COUNT_MARK = re.compile(r"\b\d+\s?x\b|\bx\s?\d+\b", re.IGNORECASE)
-_CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "thru": "through"}
+_CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "thru": "through", "da": "the", "teh": "the"}
 _COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands stand lies lie".split())
 _PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
 _WARNINGS = frozenset("careful caution warning attention heads".split())

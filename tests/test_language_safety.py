@@ -251,6 +251,8 @@ DECLARED = [
     ("Water the cactus. The frog can be touched, the wind chime can't", ("water_plants", ["watering can", "plant"],
                                                                           ["wind chime"])),
     ("pls water da plant, mind teh lamp", ("water_plants", ["watering can", "plant"], ["lamp"])),  # chat spellings
+    ("I spilled some flour, can you sweep it into the dustpan? the flour jar is next to it",
+     ("sweep_to_dustpan", ["broom", "dustpan"], ["flour jar"])),  # what was spilled is the dirt swept
 ]  # fmt: skip
 
 

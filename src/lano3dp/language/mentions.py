@@ -284,6 +284,8 @@ def object_mentions(
                 continue
             end = _noun_run(words, j, known, verbs)
             found = _mention(words, i, j, end, known, permitted)
+            if found is not None and i and words[i - 1] in _SPILLED and found.head not in OBJECT_NOUNS:
+                found = None  # "I spilled some flour, can you sweep it up": what was spilled is dirt, no object
             if found is not None and _person_who_did(found, words, end):
                 found = None  # "my son made a mess": who did something earlier is no object on the table
             if found is not None and not _possessor(words, j, end, known, verbs):
@@ -559,6 +561,7 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
 
 _BEFORE_A_MODAL = [[w] for w in "can can't cannot must mustn't should shouldn't is are won't will may".split()]
 _SENTENCE_ENDS = [[], ["."], [";"], ["!"]]
+_SPILLED = frozenset("spilled spilt spill spills dropped".split())
 _HOLDERS = frozenset("stand rack holder tray mat stool basket bed".split())
 # Verbs said right after a plural subject ("the drumsticks need to stay", "the cups look fragile").
 _PLURAL_SUBJECT_VERBS = frozenset(

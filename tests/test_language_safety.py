@@ -251,6 +251,14 @@ DECLARED = [
     ("Water the cactus. The frog can be touched, the wind chime can't", ("water_plants", ["watering can", "plant"],
                                                                           ["wind chime"])),
     ("pls water da plant, mind teh lamp", ("water_plants", ["watering can", "plant"], ["lamp"])),  # chat spellings
+    # found by the blind table 18: where an object stands said after "is", a list after a permission, a room's
+    # name before an unknown noun
+    ("Sweep the crumbs into the dustpan. The laptop is on the left, stay clear of it",
+     ("sweep_to_dustpan", ["broom", "dustpan"], ["left laptop"])),
+    ("The drawer is on the left, open it", ("open_drawer", ["left drawer"], [])),
+    ("There's a mug on the left, open the drawer", ("open_drawer", ["drawer"], ["left mug"])),
+    ("Close the microwave, the kitchen roll is leaning against it", ("close_microwave", ["microwave"],
+                                                                     ["kitchen roll"])),
     ("I spilled some flour, can you sweep it into the dustpan? the flour jar is next to it",
      ("sweep_to_dustpan", ["broom", "dustpan"], ["flour jar"])),  # what was spilled is the dirt swept
 ]  # fmt: skip
@@ -298,6 +306,8 @@ PERMITTED = [
     "Put the block in the drawer, the mug is tough, bump it all you like",
     "Put the block in the drawer, knocking the mug is no big deal",
     "Put the block in the drawer, it's not a big deal if the mug moves",
+    "Put the block in the drawer, feel free to move the lamp and the mug",
+    "Put the block in the drawer, it's not necessary to avoid the mug",
 ]
 
 
@@ -348,6 +358,7 @@ REFUSALS = [
     (NegatedCommandError, "I don't want you to sweep the dirt into the dustpan", "'don't want you to sweep"),
     (NegatedCommandError, "I don't want the bottle put in the drawer", "'don't want the bottle put in the drawer'"),
     (NegatedCommandError, "Sweeping the dirt into the dustpan won't be necessary", "'sweeping the dirt into the"),
+    (NegatedCommandError, "It isn't necessary to put the bottle in the drawer", "'isn't necessary to put the bottle"),
     (ContradictionError, "Stand the bottle upright while avoiding every bottle", "'bottle' is the object"),
     (ContradictionError, "Set the green bottle upright but keep away from every single bottle", "'green bottle'"),
     # verbs of abstaining negate the task verb after them
@@ -476,7 +487,7 @@ NOT_REFUSED = [
     ("Be a dear and open the drawer, mind the lamp, won't you?", ("open_drawer", ["drawer"], ["lamp"])),
     ("Put the block in the drawer and don't run into the lamp", ("put_item_in_drawer", ["block", "drawer"],
                                                                 ["lamp"])),
-    ("Could you open the drawer, which is on the left?", ("open_drawer", ["drawer"], [])),
+    ("Could you open the drawer, which is on the left?", ("open_drawer", ["left drawer"], [])),  # where it stands
     ("Open the drawer but take care around the vase; it was my aunt's", ("open_drawer", ["drawer"], ["vase"])),
     ("If there are two bottles, open the green bottle and keep clear of the other one",
      ("open_wine_bottle", ["green bottle"], ["other bottle"])),

@@ -91,6 +91,7 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("alright", "if"), ("matter", "if"), ("no", "problem", "if"), ("not", "a", "problem", "if"),
     ("no", "worries", "if"), ("don't", "mind"), ("dont", "mind"), ("do", "not", "mind"),
     ("no", "need", "to", "be", "careful"), ("not", "a", "big", "deal", "if"), ("no", "big", "deal", "if"),
+    ("not", "necessary", "to", "avoid"), ("isn't", "necessary", "to", "avoid"),
     ("don't", "care", "if"), ("dont", "care", "if"), ("do", "not", "care", "if"), ("don't", "care", "about"),
     ("dont", "care", "about"), ("not", "bothered", "if"), ("not", "bothered", "about"), ("not", "fussed", "if"),
     ("not", "fussed", "about"),
@@ -201,7 +202,10 @@ def permitted_spans(words: Sequence[str]) -> set[int]:
         for phrase in _PERMISSIONS:
             if tuple(words[i : i + len(phrase)]) == phrase:
                 k = i + len(phrase)
-                while k < len(words) and words[k] not in _CLAUSE_END:
+                # "feel free to move the lantern and the tent pegs": a list of objects goes on after "and"
+                while k < len(words) and (words[k] not in _CLAUSE_END or words[k] in ("and", "or", ",") and (
+                    words[k + 1 : k + 2] != [] and words[k + 1] in _DETERMINERS
+                )):
                     permitted.add(k)
                     k += 1
         # "the spoon and the mitt can both be touched": a quantifier or adverb after the modal changes nothing
@@ -561,6 +565,7 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
 
 _BEFORE_A_MODAL = [[w] for w in "can can't cannot must mustn't should shouldn't is are won't will may".split()]
 _SENTENCE_ENDS = [[], ["."], [";"], ["!"]]
+_ROOMS = frozenset("kitchen bathroom office garden lab house room".split())  # "the kitchen roll" is a roll's kind
 _SPILLED = frozenset("spilled spilt spill spills dropped".split())
 _HOLDERS = frozenset("stand rack holder tray mat stool basket bed".split())
 # Verbs said right after a plural subject ("the drumsticks need to stay", "the cups look fragile").
@@ -614,7 +619,7 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
             break  # "the pan lid": a lid comes off, so it is an object of its own
         chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
     while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
-        chunk[0] in NOT_OBJECTS and not known_ends or is_adjective(chunk[0]) and chunk[0] not in OBJECT_NOUNS
+        chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends or is_adjective(chunk[0]) and chunk[0] not in OBJECT_NOUNS
     ):  # not "the paper shredder", "the glass jar": a thing's name before a noun names its kind
         chunk.pop(0)  # "the open drawer", "the fallen bottle", "the ceramic mug": the object is the noun
     # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)

@@ -173,6 +173,7 @@ _ABSTAIN_VERBS = frozenset("refrain skip stop quit cease abstain forget".split()
 _NOT_AFTER = frozenset("do does did please must should try better need rather would will could can shall".split())
 _NEGATION_FILLER = frozenset(
     "you ever even please try to go and just accidentally dare want need wish from on with bother bothering about mind"
+    " necessary needed required"
     .split()
 )
 _NEGATING_BEFORE = {"no": "need", "off": "hold"}  # "no need to ...", "hold off on ...": the word and the one before
@@ -201,6 +202,7 @@ _STATE_WORDS = frozenset("open shut closed upright".split())
 _KEEPING = frozenset("leave left leaving leaves keep kept keeping keeps found find".split())
 _WANTING = frozenset("need needs want wants get have like".split())  # "I need the bottle standing up"
 _STATES_AFTER = frozenset("wet dry hot cold open closed shut empty full dirty clean broken cracked upright".split())
+_CLAUSE_CLOSE = frozenset(", . ; ! ? and but so".split())
 _UNITS_OF = frozenset("bottle glass cup mug jar can bowl box bag jug pot tin loaf bar".split())  # "a bottle of wine"
 _UNNEEDED = frozenset("necessary needed required".split())  # "... won't be necessary"
 _NOT_NEEDED = frozenset("not isn't won't wont no never".split())
@@ -664,6 +666,7 @@ class OfflineDecomposer:
                 or word == "not" and i and words[i - 1] in _NOT_AFTER
                 or word == "no" and words[i + 1 : i + 2] == [_NEGATING_BEFORE["no"]]
                 or word == "off" and i and words[i - 1] == _NEGATING_BEFORE["off"]
+                or word in ("isn't", "not") and words[i + 1 : i + 2] != [] and words[i + 1] in _UNNEEDED
             )
             if not negates:
                 continue
@@ -1170,9 +1173,9 @@ class OfflineDecomposer:
                 continue  # "you stood the bottle up yesterday", "I spilled soil": what happened, not a request
             if _may_happen(task, i):
                 continue  # "the cat bowl's water could spill": what may happen, not a request
-            if word in _STATE_WORDS and i >= 2 and any(w in _KEEPING for w in task[max(0, i - 5) : i - 1]) and (
-                task[i - 1] not in _PERSONAL_PRONOUNS
-            ):
+            keeping = [k for k in range(max(0, i - 5), i - 1) if task[k] in _KEEPING and not (
+                task[k] == "left" and k and task[k - 1] in DETERMINERS)]  # "on the left, open ..." is a side
+            if word in _STATE_WORDS and i >= 2 and keeping and task[i - 1] not in _PERSONAL_PRONOUNS:
                 continue  # "I left the drawer open", "keep the bottle upright": how it is, not a request
             wanted = any(w in _WANTING for w in task[max(0, i - 6) : i])
             after_noun = i and task[i - 1].isalpha() and "NOUN" in word_classes(task[i - 1])
@@ -2106,6 +2109,16 @@ def _front_positions(words: list[str]) -> list[str]:
     while i < len(out):
         post = next((p for p in _POST_POSITIONS if tuple(out[i : i + len(p)]) == p), None)
         previous = out[i - 1]
+        after = out[i + len(post)] if post is not None and i + len(post) < len(out) else "."
+        if post is not None and previous in ("is", "sits", "stands", "lies") and after in _CLAUSE_CLOSE:
+            # "the laptop is on the left, stay clear of it" -> "the left laptop is, ...": where it stands
+            start = i - 2
+            while start > 0 and out[start - 1] not in DETERMINERS and out[start - 1] not in _BOUNDARY | _SENTENCE_END:
+                start -= 1
+            if start < i - 1 and start > 0 and out[start - 1] in DETERMINERS and out[i - 2].isalpha():
+                out[start : i + len(post)] = [_POST_POSITIONS[post], *out[start : i - 1], previous]
+                i += len(post)
+                continue
         if post is None or previous in _BOUNDARY or previous in DETERMINERS or previous in _MODIFIERS:
             i += 1
             continue

@@ -619,7 +619,8 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
             break  # "the pan lid": a lid comes off, so it is an object of its own
         chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
     while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
-        chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends or is_adjective(chunk[0]) and chunk[0] not in OBJECT_NOUNS
+        chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends
+        or is_adjective(chunk[0]) and chunk[0] not in OBJECT_NOUNS
     ):  # not "the paper shredder", "the glass jar": a thing's name before a noun names its kind
         chunk.pop(0)  # "the open drawer", "the fallen bottle", "the ceramic mug": the object is the noun
     # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)

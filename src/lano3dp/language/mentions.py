@@ -273,8 +273,8 @@ def object_mentions(
             i = _after_swept(words, i + 1, known, verbs)  # "sweep the sand ...": what is swept is no object
             continue
         if tuple(words[i - 2 : i]) in _OWNED_BY:
-            i = _noun_run(words, max(i, *(k + 1 for k in range(i, min(i + 2, n)) if words[k] in _ARTICLES)), known,
-                          verbs)  # "the red dustpan belongs to my neighbour": the owner is no object
+            j = i + (word in _ARTICLES)
+            i = max(i + 1, _noun_run(words, j, known, verbs))  # "the dustpan belongs to my neighbour": no object
             continue
         if last_end == i - 1 and predicate_noun(words, i):
             i = _noun_run(words, i + 1, known, verbs)  # "that vase was a wedding present": the vase again
@@ -426,13 +426,14 @@ def is_adjective(word: str) -> bool:
         return True
     if classes == {"VERB"}:
         # "battered", "chipped", and irregular participles ("lit", "burnt", "torn"); not "-ing": "frying pan"
-        return word.endswith(("ed", "en")) or _irregular_participle(word)
+        return word.endswith(("ed", "en")) or _past_verb_form(word)
     # a word the lexicon lacks: by its suffix
     return len(word) > 4 and word.endswith(("ed", "ic", "ous", "ful", "less", "ive", "ish", "ble"))
 
 
 @functools.cache
-def _irregular_participle(word: str) -> bool:
+def _past_verb_form(word: str) -> bool:
+    """A past tense or participle other than its verb's base ("lit", "torn", "knocked"; not "put", "bed")."""
     import lemminflect
 
     return any(word != lemma and word in (*lemminflect.getInflection(lemma, "VBN"), *lemminflect.getInflection(
@@ -523,7 +524,7 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             and (word not in verbs or end == j or words[end + 1 : end + 2] in _BEFORE_A_MODAL + _SENTENCE_ENDS)
             # a verb's word heads a compound before "is" or a full stop: "the chess set is", "the umbrella stand."
             and not word.endswith("ly")
-            and not (end > j and (word.endswith("ing") or word.endswith("ed") and _irregular_participle(word)
+            and not (end > j and (word.endswith("ing") or word.endswith("ed") and _past_verb_form(word)
                                   or word in SUBJECT_VERBS))  # "the mug used ...", not "the dog bed"
             and not (end > j and word in _PLURAL_SUBJECT_VERBS and singular(words[end - 1]) != words[end - 1])
             and not (end > j and word_classes(word) and "NOUN" not in word_classes(word)
@@ -560,7 +561,7 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
     following = words[end : end + 2]
     if following[:1] in (["has"], ["had"], ["have"]):
         following = following[1:]
-    return bool(following) and following[0].isalpha() and _irregular_participle(following[0])
+    return bool(following) and following[0].isalpha() and _past_verb_form(following[0])
 
 
 _BEFORE_A_MODAL = [[w] for w in "can can't cannot must mustn't should shouldn't is are won't will may".split()]
@@ -607,12 +608,12 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
         after = words[end] if end < len(words) else "."
         plural_head = len(rest) == 1 and singular(rest[0]) != rest[0] and "NOUN" in word_classes(singular(rest[0]))
         plural_head = plural_head and after in _AFTER_PLURAL_HEAD  # not "the drawer ends up open"
-        # "the paper shredder is next to it": an agent noun (a thing that does something) heads the compound
-        agent_head = len(rest) == 1 and rest[0].endswith(("er", "ers")) and "NOUN" in word_classes(
-            singular(rest[0])) and "VERB" not in word_classes(rest[0]) and not _not_object(rest[0])
+        # "the paper shredder is next to it": an agent noun (a thing that does something) heads the compound;
         # "the umbrella stand", "the mug rack": what holds a known thing is named by both, and is the holder
-        agent_head = agent_head or len(rest) == 1 and singular(rest[0]) in _HOLDERS
-        if not plural_head and not agent_head:  # "the toy cars", "the tape measures": the plural noun is the head
+        noun_head = len(rest) == 1 and (rest[0].endswith(("er", "ers")) and "NOUN" in word_classes(
+            singular(rest[0])) and "VERB" not in word_classes(rest[0]) and not _not_object(rest[0])
+            or singular(rest[0]) in _HOLDERS)
+        if not plural_head and not noun_head:  # "the toy cars", "the tape measures": the plural noun is the head
             chunk = chunk[: max(known_ends)]  # "the mug holder" -> mug: the known noun is the head
     while chunk and _not_object(chunk[-1]) and not _known_at(chunk, len(chunk) - 1, known):
         if len(chunk) > 1 and chunk[-1] in _DETACHABLE:
@@ -624,8 +625,8 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     ):  # not "the paper shredder", "the glass jar": a thing's name before a noun names its kind
         chunk.pop(0)  # "the open drawer", "the fallen bottle", "the ceramic mug": the object is the noun
     # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)
-    # a lone adjective names nothing ("they're both hot"; "a good robot" once "robot" is dropped)
-    # an adjective alone names nothing; a word no lexicon has, alone after its article, is a name ("the babed")
+    # a lone adjective names nothing ("they're both hot"; "a good robot" once "robot" is dropped); a word no
+    # lexicon has, alone after its article, is a name ("the babed")
     material = len(chunk) == 1 and (chunk[0] in _ADJECTIVES or bool(word_classes(chunk[0])) and is_adjective(
         chunk[0])) and not _known_at(chunk, 0, known)  # not "the glass"
     # "the iron is next to it", "a little light near the drawer": a thing, said with its article

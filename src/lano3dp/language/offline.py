@@ -123,9 +123,7 @@ _COLLISION_VERBS = frozenset(
 _SURFACES = frozenset("table counter countertop worktop floor ground side desk shelf surface".split())
 _PLACEMENT_MODALS = frozenset("needs need has have to should must can will ought".split())
 _ROBOT_PARTS = frozenset("gripper grippers hand hands arm arms finger fingers elbow wrist claw".split())
-_OWN_BODY = frozenset(
-    "your the its my gripper grippers hand hands arm arms fingers yourself robot elbow wrist claw".split()
-)
+_OWN_BODY = frozenset("your the its my yourself robot".split()) | _ROBOT_PARTS
 _PHRASE_ENDS = frozenset(", and or from to near next beside away inside".split())
 # What may follow a plural noun that heads a compound with a known object word ("toy cars all over the place").
 _AFTER_PLURAL_HEAD = _PHRASE_ENDS | frozenset("all around everywhere nearby are must have on in by".split())

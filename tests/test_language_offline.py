@@ -58,7 +58,7 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_5.json", 120, 37, 120),
     ("instructions_blind_6.json", 120, 36, 120),  # first run 103/120 (score_blind.py), 108/120 (convention)
     ("instructions_blind_7.json", 120, 38, 115),  # first run 98/120 (both scorers)
-    ("instructions_blind_8.json", 120, 41, 111),  # first run 79/120 (score_blind.py), 82/120 (convention)
+    ("instructions_blind_8.json", 120, 41, 112),  # first run 79/120 (score_blind.py), 82/120 (convention)
     ("instructions_blind_9.json", 120, 38, 108),  # first run 75/120 (score_blind.py), 77/120 (convention)
     ("instructions_blind_10.json", 120, 38, 119),  # first run 113/120 (score_blind.py), 115/120 (convention)
     ("instructions_blind_11.json", 143, 43, 143),  # first run 132/143 (score_blind.py), 137/143 (convention)

@@ -1532,9 +1532,10 @@ class OfflineDecomposer:
                 not n.known and parse.tokens[n.end : n.end + 1] == ["'s"] and possessive(parse.tokens, n.end)
                 and parse.tokens[n.end + 1 : n.end + 2] in ([], *([w] for w in _SENTENCE_END), [","]))]
             before = [n for n in before if not predicate_noun(parse.tokens, n.index - 1)]  # "... was a gift"
-            # "my glasses are on the table, don't break them", "it got water yesterday, don't get it wet"
+            # "my glasses are on the table, don't break them", "it got water yesterday, don't get it wet", "it
+            # belongs to my neighbour", "my kids left a ball ...": no object a pronoun means
             before = [n for n in before if n.name not in _SURFACES and n.name not in NOT_OBJECTS
-                      and not named_in_passing(n.name, parse.tokens, n.index, n.end)]  # "belongs to my neighbour"
+                      and not named_in_passing(n.name, parse.tokens, n.index, n.index + len(n.name.split()))]
             others = [n for n in before if not any(_same_thing(skill, n, t) for t in targets)]
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)

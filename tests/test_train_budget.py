@@ -54,7 +54,9 @@ def test_the_planned_steps_are_the_budget_over_the_probed_step_cost(data):
 def test_the_probe_times_the_step_of_this_run_on_this_data(data):
     policy = policy_config_for_dataset(data, **MICRO)
     small = time_training_step(data, policy, 2, warmup=1, steps=3)
-    large = time_training_step(data, policy, 48, warmup=1, steps=3)
+    # batches far apart: with the micro policy a step is mostly fixed cost, and 2 against 48 came out reversed
+    # once on a machine busy with two other jobs
+    large = time_training_step(data, policy, 256, warmup=1, steps=3)
     assert 0 < small < large < 5.0  # CPU-s per step, growing with the batch
 
 

@@ -251,6 +251,10 @@ DECLARED = [
     ("Water the cactus. The frog can be touched, the wind chime can't", ("water_plants", ["watering can", "plant"],
                                                                           ["wind chime"])),
     ("pls water da plant, mind teh lamp", ("water_plants", ["watering can", "plant"], ["lamp"])),  # chat spellings
+    # found by the blind table 19: the object "put" acts on is the one carried, never a bottle named beside it
+    ("Put the sponge in the drawer next to the bottle", ("put_item_in_drawer", ["sponge", "drawer"], ["bottle"])),
+    ("Put the sponge in the drawer, the bottle is next to it", ("put_item_in_drawer", ["sponge", "drawer"],
+                                                                ["bottle"])),
     # found by the blind table 18: where an object stands said after "is", a list after a permission, a room's
     # name before an unknown noun
     ("Sweep the crumbs into the dustpan. The laptop is on the left, stay clear of it",

@@ -353,6 +353,7 @@ class _Noun:
     def ref(self, name: str | None = None) -> ObjectRef:
         """The object as said (its compound too: "cat toy"), or named `name`."""
         said = f"{self.compound} {self.name}" if self.compound else self.name
+        said = " ".join(said.split()[-_MAX_COMPOUND:])  # "put bowl bowl bowl ...": no name is a run of words
         return ObjectRef(name=name or said, color=self.color, size=self.size, position=self.position)
 
 
@@ -1376,6 +1377,9 @@ class OfflineDecomposer:
             score -= sum(self._weight(noun, parse) for noun in unplaced
                          if noun.known and not self._same_object(skill, noun, assigned))
             evidence[skill.name] = score
+            direct = self._direct_object(parse)
+            if direct is not None and all(noun is not direct for noun, _ in assigned.values()):
+                score -= 2.0  # "put the sponge in the drawer next to the bottle": the verb's own object has no place
             # Ties go to the reading that leaves fewer objects implied ("set the bottle upright" needs no drawer).
             parse.scores[skill.name] = score - 0.25 * (len(skill.slots) - len(assigned))
         ranked = sorted(self.registry, key=lambda s: -parse.scores[s.name])
@@ -1505,6 +1509,22 @@ class OfflineDecomposer:
                 assigned[k] = (noun, True)
                 free.remove(noun)
         return assigned, free
+
+    @staticmethod
+    def _direct_object(parse: Parse) -> _Noun | None:
+        """In "put X in/on Y": X, the object the placing verb acts on (None for any other shape of request)."""
+        if not parse.verb_at:
+            return None
+        position = parse.verb_at[0][0]
+        if any(v.split()[0] not in _GENERIC_VERBS or not set(v.split()[1:]) <= _DESTINATIONS
+               for p, v in parse.verb_at if p == position):
+            return None  # only "put X in/on Y": "take the cap off", "brush against" say no placement
+        k = position + 1
+        while k < len(parse.tokens) and (parse.tokens[k] in DETERMINERS or parse.tokens[k] in _MODIFIERS):
+            k += 1
+        noun = next((n for n in parse.nouns if n.index == k), None)
+        placed = noun is not None and noun.end < len(parse.tokens) and parse.tokens[noun.end] in _DESTINATIONS
+        return noun if placed else None
 
     @staticmethod
     def _weight(noun: _Noun, parse: Parse) -> float:

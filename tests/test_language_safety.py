@@ -255,6 +255,12 @@ DECLARED = [
     ("Put the sponge in the drawer next to the bottle", ("put_item_in_drawer", ["sponge", "drawer"], ["bottle"])),
     ("Put the sponge in the drawer, the bottle is next to it", ("put_item_in_drawer", ["sponge", "drawer"],
                                                                 ["bottle"])),
+    ("Can u close the microwave watch out for the mug", ("close_microwave", ["microwave"], ["mug"])),
+    ("Open the wine bottle. My parents are coming over for dinner tonight.", ("open_wine_bottle", ["bottle"], [])),
+    ("The bottle at the front fell over, please stand it upright", ("bottle_upright", ["front bottle"], [])),
+    ("Sweep the flour into the dustpan, careful, the pink cake stand is wobbly",
+     ("sweep_to_dustpan", ["broom", "dustpan"], ["pink cake stand"])),
+    ("Sweep the glitter into the dustpan with the push broom", ("sweep_to_dustpan", ["broom", "dustpan"], [])),
     # found by the blind table 18: where an object stands said after "is", a list after a permission, a room's
     # name before an unknown noun
     ("Sweep the crumbs into the dustpan. The laptop is on the left, stay clear of it",
@@ -312,6 +318,7 @@ PERMITTED = [
     "Put the block in the drawer, it's not a big deal if the mug moves",
     "Put the block in the drawer, feel free to move the lamp and the mug",
     "Put the block in the drawer, it's not necessary to avoid the mug",
+    "Put the block in the drawer, its fine if you bump the mug",  # found by the blind table 19
 ]
 
 

@@ -507,11 +507,15 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
         more = _known_at(words, end, known)
         if word == "can" and _modal_can(words, end):
             break  # "the mug can be moved", "the mitt can both be touched": a modal verb
-        if word in _HOLDERS and end > j and words[end + 1 : end + 2] in [*_SENTENCE_ENDS, [","], ["and"]]:
+        if word in _HOLDERS and end > j and words[end + 1 : end + 2] in [*_SENTENCE_ENDS, [","], ["and"],
+                                                                           *_BEFORE_A_MODAL]:
             end += 1  # "the umbrella stand.": a holder heads the compound, though "stand" is also a verb
             continue
         if end > j and _verb_with_object(words, end):
             break  # "the mug blocks the way", "the cat knocks it": the verb after its subject, with its object
+        if end > j and (word in ("avoid", "mind", "beware") or word in ("watch", "look") and words[end + 1 : end + 2]
+                        == ["out"]):
+            break  # "close the microwave watch out for the mug": a caution after an unpunctuated task
         if more:
             end += more
         elif word == "can" and end > j:
@@ -542,7 +546,8 @@ _OWNED_BY = frozenset({("belongs", "to"), ("belong", "to"), ("belonged", "to"), 
 _PEOPLE = frozenset(
     """son daughter kid child children mom mum dad mother father brother sister wife husband partner roommate
     flatmate housemate neighbour neighbor friend boss colleague grandma grandpa grandmother grandfather aunt uncle
-    cousin baby toddler guest visitor cleaner nanny teacher someone somebody everyone nobody""".split()
+    cousin baby toddler guest visitor cleaner nanny teacher someone somebody everyone nobody parent grandparent
+    family""".split()
 )
 
 
@@ -559,11 +564,14 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
     if mention.head not in _PEOPLE and singular(mention.head) not in _PEOPLE:
         return False
     following = words[end : end + 2]
+    if following[:1] in (["are"], ["is"], ["'re"]) and following[1:] and following[1] in _ON_THEIR_WAY:
+        return True  # "my parents are coming over for dinner": not here now
     if following[:1] in (["has"], ["had"], ["have"]):
         following = following[1:]
     return bool(following) and following[0].isalpha() and _past_verb_form(following[0])
 
 
+_ON_THEIR_WAY = frozenset("coming visiting arriving calling expecting".split())
 _BEFORE_A_MODAL = [[w] for w in "can can't cannot must mustn't should shouldn't is are won't will may".split()]
 _SENTENCE_ENDS = [[], ["."], [";"], ["!"]]
 _ROOMS = frozenset("kitchen bathroom office garden lab house room".split())  # "the kitchen roll" is a roll's kind

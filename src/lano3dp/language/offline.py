@@ -265,6 +265,7 @@ def tokenize(text: str) -> list[str]:
     text = re.sub(r"\b(left|right)-hand(ed)?\b", r"\1", text.lower().replace("’", "'"))  # "the left-hand drawer"
     text = re.sub(r"\b([a-z]+s)'(?= [a-z])", r"\1's", text)  # "the kids' toys": a plural owner, as "the kid's toys"
     text = re.sub(r"\b(there|here)s\b", r"\1's", text)  # "theres a mug": typed without the apostrophe
+    text = re.sub(r"\bits (fine|ok|okay|alright|allowed)\b", r"it's \1", text)  # "its fine if you bump it"
     for word in _WORD.findall(text):
         ending = next((e for e in _CLITICS if word.endswith(e) and len(word) > len(e)), None)
         words.extend([word[: -len(ending)], ending] if ending else [word])
@@ -945,8 +946,10 @@ class OfflineDecomposer:
             elif words[i] in _WARNINGS and words[i + 1 : i + 2] and words[i + 1] in {",", ":", "!", "-"}:
                 # "careful, the can is right beside the pan": what a warning is about is an obstacle
                 k = i + 2
-                while k < len(words) and words[k] not in _COPULAS and words[k] not in _SUBJECT_STOPS:
-                    k += 1
+                while k < len(words) and (words[k] not in _COPULAS and words[k] not in _SUBJECT_STOPS or (
+                    words[k] in ("stand", "sit") and words[k + 1 : k + 2] in (["is"], ["'s"], ["was"])
+                )):
+                    k += 1  # "careful, the cake stand is wobbly": "stand" names the thing there
                 said = words[i + 2 : k]
                 if (
                     said
@@ -1004,6 +1007,8 @@ class OfflineDecomposer:
         """The noun phrase (or list, after a plural verb) that ends before words[i], skipping a copula."""
         j = i
         while j > 0 and words[j - 1] in _COPULAS | _STANCE | _DEGREE | _SUBJECT_SKIPS:
+            if words[j - 1] in ("stand", "sit") and words[j : j + 1] in (["is"], ["'s"], ["was"]):
+                break  # "the cake stand is wobbly": "stand" names the thing
             plural |= words[j - 1] in _PLURAL_COPULAS
             j -= 1
         end = start = j
@@ -2147,7 +2152,7 @@ def _front_positions(words: list[str]) -> list[str]:
         following = out[i + len(post)] if i + len(post) < len(out) else ","
         if following.isalpha() and following not in _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS and (
             following not in _STATES_AFTER and "NOUN" in word_classes(following)
-            and not (following.endswith("s") and "VERB" in word_classes(following))
+            and not (following.endswith("s") and "VERB" in word_classes(following)) and not _past_form(following)
         ):  # not "the pan on the left stays untouched", "the lamp at the back wobbles", "... upright"
             i += 1  # "in the middle drawer": the position word is said of the noun after it
             continue

@@ -74,7 +74,7 @@ class SweepToDustpan(Task):
     stages = ("reached_broom", "grasped", "lifted", "swept", "in_dustpan")
     description = "sweep the dirt into the dustpan with the broom"
     verbs = ("sweep", "brush", "sweep up", "brush up")
-    synonyms = {"broom": ("brush", "hand brush"), "dustpan": ("dust pan",)}
+    synonyms = {"broom": ("brush", "hand brush", "push broom"), "dustpan": ("dust pan",)}
     carried = "broom"
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:

@@ -117,7 +117,8 @@ _CLAUSE_END = frozenset(". ; : ! ? , but and then while".split())
 _CLAUSE_START = frozenset(", ; . : ! ? and then please also now just to you i kindly first next".split())
 _COMPOUND_MODIFIERS = frozenset("water wine coffee tea glass".split())  # "water bottle", "coffee mug"
 _DETACHABLE = frozenset("lid cap cork cover case stopper".split())
-_CONTAINERS_OF = frozenset(
+# What holds or is a unit of something: "a bottle of wine" names the bottle (also where a side is said after it).
+CONTAINERS_OF = frozenset(
     "bottle glass cup mug jar can bowl box bag bucket jug pitcher carafe flask pot pan tin".split()
     + "loaf slice bar roll sheet".split()  # "loaves of bread", "a bar of soap": the unit is the object
 )
@@ -706,7 +707,7 @@ def _not_object(word: str) -> bool:
 
 def _contents_after_of(words: Sequence[str], i: int) -> bool:
     """ "a bottle of wine", "the glass of water": what a container holds is not another object."""
-    return i >= 2 and words[i - 1] == "of" and singular(words[i - 2]) in _CONTAINERS_OF
+    return i >= 2 and words[i - 1] == "of" and singular(words[i - 2]) in CONTAINERS_OF
 
 
 # ---- the invariant ------------------------------------------------------------------------------------------

@@ -52,6 +52,7 @@ from lano3dp.language.exceptions import (
 )
 from lano3dp.language.grounding import ground_plan
 from lano3dp.language.mentions import (
+    CONTAINERS_OF,
     DESCRIBING,
     MATERIALS,
     NOT_OBJECTS,
@@ -201,7 +202,6 @@ _KEEPING = frozenset("leave left leaving leaves keep kept keeping keeps found fi
 _WANTING = frozenset("need needs want wants get have like".split())  # "I need the bottle standing up"
 _STATES_AFTER = frozenset("wet dry hot cold open closed shut empty full dirty clean broken cracked upright".split())
 _CLAUSE_CLOSE = frozenset(", . ; ! ? and but so".split())
-_UNITS_OF = frozenset("bottle glass cup mug jar can bowl box bag jug pot tin loaf bar".split())  # "a bottle of wine"
 _UNNEEDED = frozenset("necessary needed required".split())  # "... won't be necessary"
 _NOT_NEEDED = frozenset("not isn't won't wont no never".split())
 _MODALS_AFTER_SUBJECT = frozenset("could would can will might may should".split())
@@ -947,9 +947,9 @@ class OfflineDecomposer:
                 # "careful, the can is right beside the pan": what a warning is about is an obstacle
                 k = i + 2
                 while k < len(words) and (words[k] not in _COPULAS and words[k] not in _SUBJECT_STOPS or (
-                    words[k] in ("stand", "sit") and words[k + 1 : k + 2] in (["is"], ["'s"], ["was"])
+                    _noun_before_copula(words, k)
                 )):
-                    k += 1  # "careful, the cake stand is wobbly": "stand" names the thing there
+                    k += 1
                 said = words[i + 2 : k]
                 if (
                     said
@@ -1007,8 +1007,8 @@ class OfflineDecomposer:
         """The noun phrase (or list, after a plural verb) that ends before words[i], skipping a copula."""
         j = i
         while j > 0 and words[j - 1] in _COPULAS | _STANCE | _DEGREE | _SUBJECT_SKIPS:
-            if words[j - 1] in ("stand", "sit") and words[j : j + 1] in (["is"], ["'s"], ["was"]):
-                break  # "the cake stand is wobbly": "stand" names the thing
+            if _noun_before_copula(words, j - 1):
+                break
             plural |= words[j - 1] in _PLURAL_COPULAS
             j -= 1
         end = start = j
@@ -1372,6 +1372,7 @@ class OfflineDecomposer:
         if not verb_skills:
             self._refuse_without_verb(instruction, parse)
         evidence: dict[str, float] = {}
+        direct = self._direct_object(parse)
         for skill in self.registry:
             score = 2.0 if skill.name in verb_skills else 0.0
             score += 0.5 if skill.name in phrasal_skills else 0.0  # "pull out" says more than "pull"
@@ -1382,7 +1383,6 @@ class OfflineDecomposer:
             score -= sum(self._weight(noun, parse) for noun in unplaced
                          if noun.known and not self._same_object(skill, noun, assigned))
             evidence[skill.name] = score
-            direct = self._direct_object(parse)
             if direct is not None and all(noun is not direct for noun, _ in assigned.values()):
                 score -= 2.0  # "put the sponge in the drawer next to the bottle": the verb's own object has no place
             # Ties go to the reading that leaves fewer objects implied ("set the bottle upright" needs no drawer).
@@ -1822,6 +1822,11 @@ def _with_shared_synonyms(registry: SkillRegistry) -> SkillRegistry:
     )  # fmt: skip
 
 
+def _noun_before_copula(words: Sequence[str], k: int) -> bool:
+    """ "the cake stand is wobbly": "stand" or "sit" right before "is" names the thing, it is no copula."""
+    return words[k] in ("stand", "sit") and words[k + 1 : k + 2] in (["is"], ["'s"], ["was"])
+
+
 def _may_happen(tokens: Sequence[str], i: int) -> bool:
     """ "the water could spill", "the vase might break": a modal after a noun (its subject) says what may
     happen; "could you ...", "you could ..." ask."""
@@ -2159,7 +2164,7 @@ def _front_positions(words: list[str]) -> list[str]:
         start = i - 1
         while start > 0 and out[start - 1] not in DETERMINERS and out[start - 1] not in _BOUNDARY | _SENTENCE_END:
             start -= 1
-        if start >= 3 and out[start - 1] == "of" and singular(out[start - 2]) in _UNITS_OF:
+        if start >= 3 and out[start - 1] == "of" and singular(out[start - 2]) in CONTAINERS_OF:
             start -= 2  # "the bottle of wine on the left": the side is said of the bottle
             while start > 0 and out[start - 1] not in DETERMINERS and out[start - 1] not in _BOUNDARY | _SENTENCE_END:
                 start -= 1

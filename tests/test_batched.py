@@ -3,6 +3,8 @@ and end as they end alone."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import threading
 
 import pytest
@@ -80,3 +82,31 @@ def test_the_batcher_samples_once_every_episode_waits_each_with_its_own_noise_an
     positions = torch.zeros(3, 2, 3)
     per_row = call["cost"](positions)
     assert per_row.shape == (3,) and [float(v) for v in per_row] == [float(costs[i](positions[:1])) for i in order]
+
+
+LEXICON_LOADS = """
+import subprocess
+import sys
+import threading
+from lemminflect.codecs.InflectionLUCodec import InflectionLUCodec
+from lemminflect.codecs.LemmaLUCodec import LemmaLUCodec
+from lano3dp.language.mentions import is_adjective
+
+loads = []
+for codec in (LemmaLUCodec, InflectionLUCodec):
+    original = codec.load
+    codec.load = lambda *args, _original=original: loads.append(1) or _original(*args)
+threads = [threading.Thread(target=is_adjective, args=(word,)) for word in ("battered", "kitchen", "lit", "torn")]
+for thread in threads:
+    thread.start()
+for thread in threads:
+    thread.join()
+print(len(loads))
+"""
+
+
+def test_threads_reading_instructions_at_once_load_the_english_lexicon_once():
+    # the episodes of a batched evaluation read their instructions together: lemminflect loads lazily without a
+    # lock, so each thread loaded its lexicons (~0.1 CPU-s each) until one lock held the first load
+    out = subprocess.run([sys.executable, "-c", LEXICON_LOADS], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["2"]  # one lemma and one inflection lexicon

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import functools
 import re
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -75,10 +76,28 @@ def singular(word: str) -> str:
     return next((w for w in lemmas if w in OBJECT_NOUNS), by_rule if by_rule in lemmas else lemmas[0])
 
 
-def _noun_lemmas(word: str) -> tuple[str, ...]:
-    import lemminflect  # loads its lexicon on first use (~0.3 CPU-s), not when lano3dp is imported
+_LEXICON_LOADED = threading.Event()
+_LEXICON_LOCK = threading.Lock()
 
-    return tuple(lemminflect.getAllLemmas(word).get("NOUN", ()))
+
+def english_lexicon():
+    """lemminflect with its lexicons loaded; imported on first use (~0.3 CPU-s), not when lano3dp is imported.
+
+    lemminflect loads a lexicon lazily on its first lookup, without a lock: the threads of a batched evaluation,
+    each reading its instruction at once, loaded it once per thread (16 loads at batch 16), hence the lock here."""
+    import lemminflect
+
+    if not _LEXICON_LOADED.is_set():
+        with _LEXICON_LOCK:
+            if not _LEXICON_LOADED.is_set():
+                lemminflect.getAllLemmas("was")
+                lemminflect.getInflection("be", "VBN")
+                _LEXICON_LOADED.set()
+    return lemminflect
+
+
+def _noun_lemmas(word: str) -> tuple[str, ...]:
+    return tuple(english_lexicon().getAllLemmas(word).get("NOUN", ()))
 
 
 def canonical_attribute(word: str) -> str:

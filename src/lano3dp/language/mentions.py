@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 from lano3dp.language.plan import MAX_NAME_CHARS, ObjectRef, TaskPlan
 from lano3dp.language.registry import SkillSpec
-from lano3dp.vocabulary import COLOURS, OBJECT_NOUNS, SIZE_WORDS, canonical_attribute, singular
+from lano3dp.vocabulary import COLOURS, OBJECT_NOUNS, SIZE_WORDS, canonical_attribute, english_lexicon, singular
 
 _DETERMINERS = frozenset(
     """the a an this that these those my your our their his her its some any another both either each every
@@ -404,9 +404,7 @@ def word_classes(word: str) -> frozenset[str]:
     """The word classes an English lexicon gives `word` ("NOUN", "ADJ", "VERB", ...; empty if it lacks it).
     lemminflect's lexicon rather than a hand list: which words are nouns is open-ended ("kitchen", "cereal"),
     and suffixes mislead ("kitchen" ends like "wooden")."""
-    import lemminflect  # loads its lexicon on first use (~0.3 CPU-s), not when lano3dp is imported
-
-    return frozenset(lemminflect.getAllLemmas(word))
+    return frozenset(english_lexicon().getAllLemmas(word))
 
 
 DESCRIBING = _ADJECTIVES  # adjectives that describe an object and never start its name ("hot", "open")
@@ -427,18 +425,28 @@ def is_adjective(word: str) -> bool:
         return True
     if classes == {"VERB"}:
         # "battered", "chipped", and irregular participles ("lit", "burnt", "torn"); not "-ing": "frying pan"
-        return word.endswith(("ed", "en")) or _past_verb_form(word)
+        return word.endswith(("ed", "en")) or past_verb_form(word)
     # a word the lexicon lacks: by its suffix
     return len(word) > 4 and word.endswith(("ed", "ic", "ous", "ful", "less", "ive", "ish", "ble"))
 
 
-@functools.cache
-def _past_verb_form(word: str) -> bool:
-    """A past tense or participle other than its verb's base ("lit", "torn", "knocked"; not "put", "bed")."""
-    import lemminflect
+def verb_lemmas(word: str) -> frozenset[str]:
+    """Base forms of a verb form ("swept" -> sweep) from lemminflect's lexicon."""
+    return frozenset(english_lexicon().getAllLemmas(word).get("VERB", ()))
 
+
+@functools.cache
+def past_verb_form(word: str) -> bool:
+    """A past tense or participle other than its verb's base ("lit", "torn", "stood", "opened"; not "put",
+    "set", "bed"). A request is in the base form; the passive is rewritten before."""
+    lemminflect = english_lexicon()
     return any(word != lemma and word in (*lemminflect.getInflection(lemma, "VBN"), *lemminflect.getInflection(
-        lemma, "VBD")) for lemma in lemminflect.getAllLemmas(word).get("VERB", ()))  # "lit" is only a VBD there
+        lemma, "VBD")) for lemma in verb_lemmas(word))  # "lit" is only a VBD there
+
+
+def same_participle(verb: str) -> bool:
+    """Whether the verb's past participle is its base form ("put", "set", "shut")."""
+    return verb in english_lexicon().getInflection(verb, "VBN")
 
 
 def _bare_plural_noun(words: Sequence[str], i: int) -> bool:
@@ -529,7 +537,7 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             and (word not in verbs or end == j or words[end + 1 : end + 2] in _BEFORE_A_MODAL + _SENTENCE_ENDS)
             # a verb's word heads a compound before "is" or a full stop: "the chess set is", "the umbrella stand."
             and not word.endswith("ly")
-            and not (end > j and (word.endswith("ing") or word.endswith("ed") and _past_verb_form(word)
+            and not (end > j and (word.endswith("ing") or word.endswith("ed") and past_verb_form(word)
                                   or word in SUBJECT_VERBS))  # "the mug used ...", not "the dog bed"
             and not (end > j and word in _PLURAL_SUBJECT_VERBS and singular(words[end - 1]) != words[end - 1])
             and not (end > j and word_classes(word) and "NOUN" not in word_classes(word)
@@ -569,7 +577,7 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
         return True  # "my parents are coming over for dinner": not here now
     if following[:1] in (["has"], ["had"], ["have"]):
         following = following[1:]
-    return bool(following) and following[0].isalpha() and _past_verb_form(following[0])
+    return bool(following) and following[0].isalpha() and past_verb_form(following[0])
 
 
 _ON_THEIR_WAY = frozenset("coming visiting arriving calling expecting".split())

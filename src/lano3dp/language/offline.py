@@ -64,9 +64,12 @@ from lano3dp.language.mentions import (
     named_in_passing,
     names_another,
     object_mentions,
+    past_verb_form,
     permitted_spans,
     possessive,
     predicate_noun,
+    same_participle,
+    verb_lemmas,
     word_classes,
 )
 from lano3dp.language.normalize import normalize_instruction
@@ -270,32 +273,6 @@ def tokenize(text: str) -> list[str]:
         ending = next((e for e in _CLITICS if word.endswith(e) and len(word) > len(e)), None)
         words.extend([word[: -len(ending)], ending] if ending else [word])
     return words
-
-
-@functools.lru_cache(maxsize=4096)
-def _past_form(word: str) -> bool:
-    """Whether `word` is a past tense or participle that differs from its verb's base ("stood", "opened"; not
-    "put", "set"), by lemminflect's lexicon. A request is in the base form; the passive is rewritten before."""
-    import lemminflect
-
-    return any(
-        word != lemma and word in (*lemminflect.getInflection(lemma, "VBD"), *lemminflect.getInflection(lemma, "VBN"))
-        for lemma in _verb_lemmas(word)
-    )
-
-
-def _same_participle(verb: str) -> bool:
-    """Whether the verb's past participle is its base form ("put", "set", "shut")."""
-    import lemminflect
-
-    return verb in lemminflect.getInflection(verb, "VBN")
-
-
-def _verb_lemmas(word: str) -> frozenset[str]:
-    """Base forms of an irregular participle ("swept" -> sweep) from lemminflect's lexicon."""
-    import lemminflect  # its lexicon loads on first use, not when lano3dp is imported
-
-    return frozenset(lemminflect.getAllLemmas(word).get("VERB", ()))
 
 
 @functools.lru_cache(maxsize=8192)
@@ -596,8 +573,8 @@ class OfflineDecomposer:
                 j += 1  # "be carefully placed"
             if j >= len(out):
                 continue
-            task_verbs = (lemmas(out[j]) | _verb_lemmas(out[j])) & (self._single_verbs | {"avoid"}) - _COLLISION_VERBS
-            if not task_verbs or (out[j] in self._single_verbs and not _same_participle(out[j])):
+            task_verbs = (lemmas(out[j]) | verb_lemmas(out[j])) & (self._single_verbs | {"avoid"}) - _COLLISION_VERBS
+            if not task_verbs or (out[j] in self._single_verbs and not same_participle(out[j])):
                 continue  # not a participle of a task verb ("be careful", "be open"); "be put", "be set" are
             subject_end = i
             while subject_end > 0 and out[subject_end - 1] in _PASSIVE_MODALS:
@@ -1173,7 +1150,7 @@ class OfflineDecomposer:
                 continue
             wanted_done = i >= 2 and task[i - 1].isalpha() and "NOUN" in word_classes(task[i - 1]) and any(
                 w in _WANTING_DONE for w in task[max(0, i - 6) : i - 1])  # "I want the drawer opened"
-            if _past_form(word) and not wanted_done:
+            if past_verb_form(word) and not wanted_done:
                 continue  # "you stood the bottle up yesterday", "I spilled soil": what happened, not a request
             if _may_happen(task, i):
                 continue  # "the cat bowl's water could spill": what may happen, not a request
@@ -1754,7 +1731,7 @@ def _check_outcome(instruction: str, skill: SkillSpec, tokens: Sequence[str], fi
     skill's destination, not named, would be taken instead)."""
     for i in range(len(tokens) - 2):
         lying = tokens[i] in ("on", "onto") and tokens[i + 1] in ("its", "their", "the") and tokens[i + 2] == "side"
-        state = i and (tokens[i - 1] in _COPULAS or tokens[i - 1] in ("lying", "fell", "fallen") or _past_form(
+        state = i and (tokens[i - 1] in _COPULAS or tokens[i - 1] in ("lying", "fell", "fallen") or past_verb_form(
             tokens[i - 1]))  # "it's lying on its side", "it fell on its side": how it is now
         if lying and not state and (i + 3 >= len(tokens) or tokens[i + 3] != "of"):  # not "on the side of the table"
             raise InstructionNotUnderstoodError(
@@ -1768,7 +1745,7 @@ def _check_outcome(instruction: str, skill: SkillSpec, tokens: Sequence[str], fi
             tokens[before] in DETERMINERS or tokens[before] in _MODIFIERS
         ):
             before -= 1  # "left" is a side as well
-        if before >= 0 and (tokens[before] in _KEEPING or _past_form(tokens[before])):
+        if before >= 0 and (tokens[before] in _KEEPING or past_verb_form(tokens[before])):
             continue  # "somebody left the microwave open": how it is now, not the outcome asked for
         if opposite and skill.name.startswith(opposite):
             raise InstructionNotUnderstoodError(
@@ -2157,7 +2134,7 @@ def _front_positions(words: list[str]) -> list[str]:
         following = out[i + len(post)] if i + len(post) < len(out) else ","
         if following.isalpha() and following not in _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS and (
             following not in _STATES_AFTER and "NOUN" in word_classes(following)
-            and not (following.endswith("s") and "VERB" in word_classes(following)) and not _past_form(following)
+            and not (following.endswith("s") and "VERB" in word_classes(following)) and not past_verb_form(following)
         ):  # not "the pan on the left stays untouched", "the lamp at the back wobbles", "... upright"
             i += 1  # "in the middle drawer": the position word is said of the noun after it
             continue

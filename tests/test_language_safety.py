@@ -271,6 +271,21 @@ DECLARED = [
                                                                      ["kitchen roll"])),
     ("I spilled some flour, can you sweep it into the dustpan? the flour jar is next to it",
      ("sweep_to_dustpan", ["broom", "dustpan"], ["flour jar"])),  # what was spilled is the dirt swept
+    # found by the blind table 20: dictated speech (fillers, words said twice, a phrase taken back without a
+    # comma), owners and people, texting shorthand
+    ("er close the the uh the microwave", ("close_microwave", ["microwave"], [])),
+    ("put the blue block no sorry the red block in the drawer", ("put_item_in_drawer", ["red block", "drawer"], [])),
+    ("stand up the small bottle wait no the big one", ("bottle_upright", ["large bottle"], [])),
+    ("open the I mean close the microwave", ("close_microwave", ["microwave"], [])),
+    ("pour the bowl into the pan, actually no, put the block in the drawer",
+     ("put_item_in_drawer", ["block", "drawer"], [])),
+    ("put the phone on the on the dock", ("phone_on_base", ["phone", "base"], [])),
+    ("open the drawer, mind my aunt's teapot", ("open_drawer", ["drawer"], ["teapot"])),
+    ("open the drawer, mind the kettle's spout", ("open_drawer", ["drawer"], ["kettle"])),
+    ("could you close the microwave before my dad visits", ("close_microwave", ["microwave"], [])),
+    ("the dog knocked the bottle over, stand it upright", ("bottle_upright", ["bottle"], [])),
+    ("open the drawer, dont worry abt the sponge", ("open_drawer", ["drawer"], [])),
+    ("put the block in the drawer, if you bump the cup thats fine", ("put_item_in_drawer", ["block", "drawer"], [])),
 ]  # fmt: skip
 
 
@@ -348,6 +363,7 @@ REFUSALS = [
     (NegatedCommandError, "don't open the drawer", "'don't open the drawer' asks the robot not to do something"),
     (NegatedCommandError, "Do not pour the bowl into the pan.", "'do not pour the bowl into the pan' asks the robot"),
     (NegatedCommandError, "never put the block in the drawer", "'never put the block in the drawer' asks the robot"),
+    (NegatedCommandError, "water the plant no wait don't", "'don't water the plant' asks the robot"),  # taken back
     (NegatedCommandError, "Please don't move the block into the drawer", "'don't move the block into the drawer'"),
     (SeveralTasksError, "Open the drawer and put the block in it",
      "it asks for two tasks ('open': open_drawer, open_wine_bottle; 'put in': bottle_in_drawer, put_item_in_drawer)"),

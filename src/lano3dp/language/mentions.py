@@ -520,6 +520,8 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
                                                                            *_BEFORE_A_MODAL]:
             end += 1  # "the umbrella stand.": a holder heads the compound, though "stand" is also a verb
             continue
+        if end > j and (singular(words[end - 1]) in _PEOPLE and word.endswith("s") and "VERB" in word_classes(word)):
+            break  # "before my mum visits": a person's verb, not a "mum visit"
         if end > j and _verb_with_object(words, end):
             break  # "the mug blocks the way", "the cat knocks it": the verb after its subject, with its object
         if end > j and (word in ("avoid", "mind", "beware") or word in ("watch", "look") and words[end + 1 : end + 2]
@@ -556,8 +558,9 @@ _PEOPLE = frozenset(
     """son daughter kid child children mom mum dad mother father brother sister wife husband partner roommate
     flatmate housemate neighbour neighbor friend boss colleague grandma grandpa grandmother grandfather aunt uncle
     cousin baby toddler guest visitor cleaner nanny teacher someone somebody everyone nobody parent grandparent
-    family""".split()
-)
+    family nana nan nanna granny gran grandad granddad grampa nephew niece boyfriend girlfriend fiance fiancee
+    sibling cat dog puppy kitten pet""".split()
+)  # pets too: "the cat knocked it over"
 
 
 def named_in_passing(name: str, words: Sequence[str], start: int, end: int) -> bool:
@@ -577,6 +580,10 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
         return True  # "my parents are coming over for dinner": not here now
     if following[:1] in (["has"], ["had"], ["have"]):
         following = following[1:]
+    if following and following[0].endswith("s") and following[0] not in _BOUNDARY and "VERB" in word_classes(
+        following[0]
+    ):
+        return True  # "before my mum visits", "my son leaves it lying around": a person doing something
     return bool(following) and following[0].isalpha() and past_verb_form(following[0])
 
 

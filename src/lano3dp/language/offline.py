@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import functools
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -113,7 +113,7 @@ _NON_OBJECTS = frozenset(
     """left right side top bottom middle front back edge corner table counter way time contents content
     water liquid soup stuff one ones area spot place workspace dirt dust crumb crumbs trash mess debris
     cork lid door what thing everything something nothing anything robot okay ok sure bit path route deal problem
-    idea chance mistake distance space""".split()
+    idea chance mistake distance space house home whatever""".split()
 ) | UNITS
 # Said where an object could be, naming none: "obstacles: none", "be a dear", "..., won't you?"
 _TAGS = frozenset("none dear won't wouldn't isn't aren't".split())
@@ -152,7 +152,8 @@ _POLITE = frozenset(
 # Hesitations and chat shorthand: no word of the task ("don't hit the lamp lol" names a lamp)
 _FILLERS = frozenset("um umm uh uhm er erm hmm lol lmao rofl thx ty pls plz rn btw tbh idk omg".split())
 _COUNT_MARK = re.compile(r"\b\d+\s?x\b|\bx\s?\d+\b", re.IGNORECASE)
-_CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "thru": "through", "da": "the", "teh": "the"}
+_CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "thru": "through", "da": "the", "teh": "the", "abt": "about",
+               "tho": "though", "cn": "can", "bc": "because", "cuz": "because", "coz": "because"}
 _COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands stand lies lie".split())
 _PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
 _WARNINGS = frozenset("careful caution warning attention heads".split())
@@ -268,7 +269,9 @@ def tokenize(text: str) -> list[str]:
     text = re.sub(r"\b(left|right)-hand(ed)?\b", r"\1", text.lower().replace("’", "'"))  # "the left-hand drawer"
     text = re.sub(r"\b([a-z]+s)'(?= [a-z])", r"\1's", text)  # "the kids' toys": a plural owner, as "the kid's toys"
     text = re.sub(r"\b(there|here)s\b", r"\1's", text)  # "theres a mug": typed without the apostrophe
-    text = re.sub(r"\bits (fine|ok|okay|alright|allowed)\b", r"it's \1", text)  # "its fine if you bump it"
+    text = re.sub(r"\bits (fine|ok|okay|alright|allowed|been|not|just|gonna|always|still|too|so)\b", r"it's \1",
+                  text)  # "its fine if you bump it", "its been open all day": typed without the apostrophe
+    text = re.sub(r"\bthats (fine|ok|okay|alright|allowed|not|good|great)\b", r"that's \1", text)
     for word in _WORD.findall(text):
         ending = next((e for e in _CLITICS if word.endswith(e) and len(word) > len(e)), None)
         words.extend([word[: -len(ending)], ending] if ending else [word])
@@ -477,15 +480,13 @@ class OfflineDecomposer:
             "ing") else "touch", text, flags=re.IGNORECASE)  # an idiom of touching
         text = re.sub(r"\s*(?:->|=>|-->|→)\s*", " into ", text)  # "block -> drawer": shorthand for "into"
         tokens = tokenize(text)
-        # a filler after a determiner is a noun the user named ("avoid the rofl"), never dropped
-        words = [_CHAT_WORDS.get(w, w) for k, w in enumerate(tokens)
-                 if w not in _FILLERS or k and tokens[k - 1] in DETERMINERS]
+        words = [_CHAT_WORDS.get(w, w) for w in _without_disfluencies(tokens)]
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
         vocabulary = sorted(set(self._vocabulary) | set(scene_kinds), key=lambda w: -len(w.split()))
         # a capitalised word inside a sentence is a name ("Sam, wait"), never a typo of a verb or an object
         names = {w.lower() for w in re.findall(r"(?<![.!?;:]\s)(?<!^)(?<=\s)[A-Z][a-z]+\b", text)}
         words, read_as = self._read_words(words, vocabulary, names)
-        words = _colour_phrases(_quantities(_partitives(_self_repairs(words))))
+        words = _colour_phrases(_quantities(_partitives(_self_repairs(words, self._is_task_verb))))
         words = self._passive_requests(_polite_requests(_own_body(words)))
         words = _front_positions(_declared_placements(_contact_cues(words)))
         words, shorthand = self._shorthand_placements(words, vocabulary)
@@ -1097,6 +1098,11 @@ class OfflineDecomposer:
                 break  # "don't get the books wet": a state said of the object after it
             if nouns and word.endswith("ed") and word_classes(word) and "NOUN" not in word_classes(word):
                 break  # "the wine glasses lined up behind it": a participle after the noun
+            if word == "'s" and nouns and " ".join(nouns) not in OBJECT_NOUNS and possessive(chunk, k) and (
+                singular(following) not in _NON_OBJECTS
+            ):
+                nouns, color, size = [], None, None  # "grandad's cake stand": the owner is no object, the stand is
+                continue
             # A function word straight after "the" is a noun after all ("the can").
             if word in _BOUNDARY and not after_determiner:
                 if nouns or vague:
@@ -1993,28 +1999,77 @@ def _quantities(words: list[str]) -> list[str]:
     return out
 
 
+def _without_disfluencies(tokens: list[str]) -> list[str]:
+    """Fillers ("um", "uh") and words said twice in a row ("the the", "on the on the") dropped, as dictated speech
+    has them. A filler that ends a noun phrase after a determiner is a noun the user named ("avoid the rofl"),
+    and stays; before another word ("the uh the drawer") it is a pause."""
+    out: list[str] = []
+    for k, word in enumerate(tokens):
+        following = tokens[k + 1] if k + 1 < len(tokens) else "."
+        if word in _FILLERS and not (out and out[-1] in DETERMINERS and following in _CLAUSE_CLOSE):
+            continue
+        out.append(word)
+        for n in (1, 2):  # a determiner or a preposition said again: "the the", "on the on the"
+            if len(out) >= 2 * n and out[-n:] == out[-2 * n : -n] and out[-1] in DETERMINERS | _BOUNDARY and all(
+                w.isalpha() for w in out[-n:]
+            ) and out[-1] not in ("that", "had"):
+                del out[-n:]
+    return out
+
+
 _REPAIRS: tuple[tuple[str, ...], ...] = tuple(sorted((
     ("no",), ("sorry",), ("i", "mean"), ("no", "wait"), ("wait",), ("oops",), ("rather",), ("correction",),
     ("actually",), ("make", "that"), ("scratch", "that"), ("or", "rather"), ("no", "sorry"), ("sorry", "i", "mean"),
+    ("wait", "no"), ("actually", "no"), ("no", "actually"), ("sorry", "no"),
 ), key=len, reverse=True))  # the longest first: "no wait" before "no"
+# Repairs that need no comma before them: dictated speech has none ("the yellow bowl no sorry the orange bowl").
+# A bare "no" or "sorry" repairs only before a determiner or a task verb, after a noun (`_self_repairs`).
+_BARE_REPAIRS = frozenset({("i", "mean"), ("no", "wait"), ("wait", "no"), ("or", "rather"), ("no", "sorry"),
+                           ("sorry", "i", "mean"), ("actually", "no"), ("no", "actually"), ("sorry", "no"),
+                           ("scratch", "that")})
+_TAKE_BACKS = frozenset("don't dont never".split())  # "open the drawer no wait don't": the command taken back
 
 
-def _self_repairs(words: list[str]) -> list[str]:
-    """ "put the block, no, the cube, in the drawer", "open the bottle, I mean the drawer": the user took the first
-    noun phrase back and said the second instead. The first (from its determiner) and the repair words go, so
-    the retracted object is neither acted on nor avoided."""
+def _self_repairs(words: list[str], is_task_verb: Callable[[str], bool]) -> list[str]:
+    """The user took back what they said and said something else instead; what was taken back goes, so it is
+    neither acted on nor avoided:
+    - a noun phrase: "put the block, no, the cube, in the drawer", "the yellow bowl no sorry the orange bowl",
+      "the big plant wait no the little one" (the little plant), "with the jug -- no wait, with the can";
+    - a command, when the repair starts with a task verb: "open the no sorry close the microwave", "put the phone
+      on the base -- actually no, put the block in the drawer" (from the taken-back verb on);
+    - the whole command, when the repair is a bare "don't": "open the drawer no wait don't" reads as "don't open
+      the drawer", a negated command."""
     out = list(words)
     i = 1
     while i < len(out):
-        repair = next((r for r in _REPAIRS if out[i - 1] == "," and tuple(out[i : i + len(r)]) == r), None)
+        comma = out[i - 1] == ","
+        repair = next((r for r in _REPAIRS if tuple(out[i : i + len(r)]) == r), None)
+        if repair is not None and not comma and repair not in _BARE_REPAIRS:
+            following = out[i + len(repair) : i + len(repair) + 1]
+            after_noun = out[i - 1].isalpha() and out[i - 1] not in _BOUNDARY and out[i - 1] not in DETERMINERS
+            repair = repair if repair in (("no",), ("sorry",)) and after_noun and following and (
+                following[0] in DETERMINERS or is_task_verb(following[0])) else None
         if repair is None:
             i += 1
             continue
+        stop = i - 1 if comma else i  # the taken-back words end before `stop`
         k = i + len(repair) + (out[i + len(repair) : i + len(repair) + 1] == [","])
-        first = i - 2  # the retracted phrase ends before the comma
+        sentence_start = max((j + 1 for j in range(stop) if out[j] in _SENTENCE_END), default=0)
+        verb = next((j for j in range(stop - 1, sentence_start - 1, -1) if is_task_verb(out[j])), None)
+        if k < len(out) and out[k] in _TAKE_BACKS and verb is not None and (
+            k + 1 == len(out) or out[k + 1] in _CLAUSE_CLOSE
+        ):
+            out[verb:k + 1] = ["don't", *out[verb:stop]]  # "open the drawer no wait don't"
+            i = verb + 1
+            continue
+        if k < len(out) and is_task_verb(out[k]) and verb is not None:
+            out[verb:k] = []  # "open the no sorry close the microwave"
+            i = verb + 1
+            continue
+        first = stop - 1  # the taken-back noun phrase, back to its determiner
         while first >= 0 and out[first] not in DETERMINERS and (out[first] in _MODIFIERS or out[first].isalpha()) and (
             out[first] not in _BOUNDARY
-        ) and i - 2 - first < 4:
+        ) and stop - 1 - first < 4:
             first -= 1
         end = k + 1
         while end < len(out) and end - k < 5 and out[end].isalpha() and out[end] not in _BOUNDARY:
@@ -2029,10 +2084,12 @@ def _self_repairs(words: list[str]) -> list[str]:
             i = first
             continue
         if k < len(out) and out[k] in DETERMINERS and out[first : first + 1] in [[d] for d in DETERMINERS] and (
-            first < i - 2 and said_instead
+            first < stop - 1 and said_instead
         ):
             if end < len(out) and out[end] == "," and all(w in _MODIFIERS for w in out[k + 1 : end]):
                 del out[end]  # "the yellow -- sorry, the orange -- block": the closing dash ends the repair only
+            if out[end - 1 : end] == ["one"] and out[stop - 1] not in _MODIFIERS:
+                out[end - 1] = out[stop - 1]  # "the big plant wait no the little one": the little plant
             out[first:k] = []
             i = first + 1
             continue

@@ -10,8 +10,9 @@ The convention: a target is compared by its slot. Where its noun is a registered
 in the pan slot, "flask" in the bottle slot) it is read as the slot word, on both sides, so a table written as
 typed and a plan that reports the slot word agree; a noun the slot only accepts (the item slot's "stapler") is
 compared as said. Objects compare as sets of words (position, size, colour and noun words), so "top drawer"
-written as a name equals position "top" + name "drawer". Obstacles compare as a multiset: their order says
-nothing.
+written as a name equals position "top" + name "drawer". What an object is made of, said before its noun ("glass
+vase", "cast-iron skillet"), is no part of its name, on both sides (tables disagree: "the glass vase" is a vase).
+Obstacles compare as a multiset: their order says nothing.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lano3dp.language import LanguageError
+from lano3dp.language.mentions import MATERIALS
 from lano3dp.language.offline import POSITION_WORDS
 from lano3dp.vocabulary import COLOURS, SIZE_WORDS, canonical_attribute, singular
 
@@ -70,8 +72,11 @@ def _words(ref: dict, slot=None) -> frozenset:
     name = ref["name"]
     if slot is not None and (name in slot.synonyms or singular(name) in slot.synonyms):
         name = slot.word  # the convention: a registered synonym is its slot's word, on both sides
-    said = [ref.get("position"), ref.get("size"), ref.get("color"), name]
     # a hyphen breaks words as a space does ("yo-yo" is read as "yo yo", as scene names are)
+    words = name.replace("-", " ").split()
+    while len(words) > 1 and words[0] in MATERIALS:
+        words.pop(0)
+    said = [ref.get("position"), ref.get("size"), ref.get("color"), " ".join(words)]
     return frozenset(canonical_attribute(w) for part in said if part for w in str(part).replace("-", " ").split())
 
 

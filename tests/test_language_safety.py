@@ -286,6 +286,17 @@ DECLARED = [
     ("the dog knocked the bottle over, stand it upright", ("bottle_upright", ["bottle"], [])),
     ("open the drawer, dont worry abt the sponge", ("open_drawer", ["drawer"], [])),
     ("put the block in the drawer, if you bump the cup thats fine", ("put_item_in_drawer", ["block", "drawer"], [])),
+    # found by the blind table 21: technical wording, measures and materials before a noun
+    ("Deposit the sponge in the left drawer.", ("put_item_in_drawer", ["sponge", "left drawer"], [])),
+    ("Retrieve the phone and deposit it on the dock", ("phone_on_base", ["phone", "base"], [])),
+    ("Kindly ensure the microwave is shut", ("close_microwave", ["microwave"], [])),
+    ("make sure the bottom drawer is open", ("open_drawer", ["bottom drawer"], [])),
+    ("please make sure the bottle is upright", ("bottle_upright", ["bottle"], [])),
+    ("hydrate the plant with the watering can", ("water_plants", ["watering can", "plant"], [])),
+    ("open the drawer, mind the 3 litre jug and the 250 ml glass flask", ("open_drawer", ["drawer"], ["jug", "flask"])),
+    ("close the microwave, the cast-iron pot and the glass jar are fragile",
+     ("close_microwave", ["microwave"], ["pot", "jar"])),
+    ("open the drawer, mind the glass and the wine glass", ("open_drawer", ["drawer"], ["glass", "wine glass"])),
 ]  # fmt: skip
 
 
@@ -364,6 +375,10 @@ REFUSALS = [
     (NegatedCommandError, "Do not pour the bowl into the pan.", "'do not pour the bowl into the pan' asks the robot"),
     (NegatedCommandError, "never put the block in the drawer", "'never put the block in the drawer' asks the robot"),
     (NegatedCommandError, "water the plant no wait don't", "'don't water the plant' asks the robot"),  # taken back
+    (UnknownVerbError, "recork the bottle", "'recork' is not a verb any skill is asked for with (skills"),  # no "decork"
+    (SeveralTasksError, "ensure the drawer is open and the microwave is shut", "it asks for two tasks"),
+    (ContradictionError, "put the blue block in the drawer, careful, mind all the blocks", "'blue block' is the"),
+    (ContradictionError, "pour the bowl into the pan, but mind the pan, never touch it", "'never touch it' means pan"),
     (NegatedCommandError, "Please don't move the block into the drawer", "'don't move the block into the drawer'"),
     (SeveralTasksError, "Open the drawer and put the block in it",
      "it asks for two tasks ('open': open_drawer, open_wine_bottle; 'put in': bottle_in_drawer, put_item_in_drawer)"),

@@ -52,10 +52,11 @@ NOT_OBJECTS = frozenset(
     go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space
     step""".split()
 ) - {"obstacle?"}
-# Units of distance: "the grinder 8 cm to the right of the pan" names a grinder.
+# Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.
 UNITS = frozenset(
     """cm mm centimetre centimetres centimeter centimeters millimetre millimetres metre metres meter meters inch
-    inches foot feet""".split()
+    inches foot feet litre litres liter liters ml millilitre millilitres milliliter milliliters gallon gallons
+    pint pints oz ounce ounces kg kilo kilos gram grams""".split()
 )
 NOT_OBJECTS = NOT_OBJECTS | UNITS
 # Words that end a noun phrase.
@@ -379,12 +380,12 @@ def _coordinated_noun(words: Sequence[str], i: int, known_length: int, verbs: se
 
 
 # What a thing is made of describes it and is no part of its name ("the porcelain teapot" is a teapot). Not
-# "glass", "paper" or "rubber": they also name things and start compound names ("paper towel", "rubber duck").
+# "paper" or "rubber": they also start compound names ("paper towel", "rubber duck").
 MATERIALS = frozenset(
     """plastic wooden metal metallic ceramic steel cardboard porcelain silk leather cotton wool woollen woolen
     velvet linen wicker bamboo copper brass aluminium aluminum enamel suede satin nylon denim terracotta pewter
-    bronze stainless""".split()
-)
+    bronze stainless glass foam cast iron""".split()
+)  # "glass", "iron" name things alone ("the glass"); before a noun they say what it is made of
 _PRONOUNS_BEFORE_IS = frozenset("that it there here what who he she this where which".split())
 _ADJECTIVES = frozenset(
     """open closed shut empty full dirty clean old new broken cracked upright fallen lying standing tipped wet dry
@@ -644,10 +645,10 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
             break  # "the pan lid": a lid comes off, so it is an object of its own
         chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
     while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
-        chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends
-        or is_adjective(chunk[0]) and chunk[0] not in OBJECT_NOUNS
-    ):  # not "the paper shredder", "the glass jar": a thing's name before a noun names its kind
-        chunk.pop(0)  # "the open drawer", "the fallen bottle", "the ceramic mug": the object is the noun
+        chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends or chunk[0] in UNITS
+        or is_adjective(chunk[0]) and (chunk[0] not in OBJECT_NOUNS or chunk[0] in MATERIALS)
+    ):  # not "the paper shredder": a thing's name before a noun names its kind
+        chunk.pop(0)  # "the open drawer", "the glass beaker", "the 2 litre jug": the object is the noun
     # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)
     # a lone adjective names nothing ("they're both hot"; "a good robot" once "robot" is dropped); a word no
     # lexicon has, alone after its article, is a name ("the babed")

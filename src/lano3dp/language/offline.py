@@ -202,6 +202,8 @@ _PASSIVE_MODALS = frozenset(
     "is are to should must shall needs need has have ought will would can could not never also please".split()
 )
 _STATE_WORDS = frozenset("open shut closed upright".split())
+# A state asked for with "ensure ... is": the skill's verb that makes it ("ensure the bottle is upright").
+_ENSURED_STATES = {"open": ("open",), "shut": ("shut",), "upright": ("stand", "upright")}
 _KEEPING = frozenset("leave left leaving leaves keep kept keeping keeps found find".split())
 _WANTING = frozenset("need needs want wants get have like".split())  # "I need the bottle standing up"
 _STATES_AFTER = frozenset("wet dry hot cold open closed shut empty full dirty clean broken cracked upright".split())
@@ -575,7 +577,10 @@ class OfflineDecomposer:
             if j >= len(out):
                 continue
             task_verbs = (lemmas(out[j]) | verb_lemmas(out[j])) & (self._single_verbs | {"avoid"}) - _COLLISION_VERBS
-            if not task_verbs or (out[j] in self._single_verbs and not same_participle(out[j])):
+            state = _ENSURED_STATES.get(out[j]) if ensured else None  # "ensure the drawer is open"
+            if state is not None and state[0] in self._single_verbs:
+                task_verbs = {state[0]}
+            elif not task_verbs or (out[j] in self._single_verbs and not same_participle(out[j])):
                 continue  # not a participle of a task verb ("be careful", "be open"); "be put", "be set" are
             subject_end = i
             while subject_end > 0 and out[subject_end - 1] in _PASSIVE_MODALS:
@@ -598,13 +603,18 @@ class OfflineDecomposer:
             clause = out[start:subject_end]
             # "it is requested that the plant be watered": the subject follows "that"
             subject_at = start + len(clause) - clause[::-1].index("that") if "that" in clause else start
+            if ensured and subject_at == start and {"ensure", "sure"} & set(clause):
+                # "ensure the microwave is closed", "make sure the drawer is open"
+                subject_at = start + max(k for k, w in enumerate(clause) if w in ("ensure", "sure")) + 1
             if subject_at >= subject_end or out[subject_at] not in DETERMINERS:
                 continue
-            if subject_end == i and subject_at == start:
+            coordinated = ensured and start > 0 and out[start - 1] == "and"  # "ensure X is open and Y is shut"
+            if subject_end == i and subject_at == start and not coordinated:
                 continue  # no modal and no "that": "the drawer be opened" is no request
             modals = out[subject_end:i]
             negated = "not" in modals or "never" in modals
-            out[start : j + 1] = [*(["don't"] if negated else []), sorted(task_verbs)[0], *out[subject_at:subject_end]]
+            out[start : j + 1] = [*(["don't"] if negated else []), sorted(task_verbs)[0], *out[subject_at:subject_end],
+                                  *(state[1:] if state else ())]
             i = start + 1  # what is left of the sentence before it
         return out
 
@@ -613,8 +623,7 @@ class OfflineDecomposer:
     ) -> tuple[list[str], list[str]]:
         """Everyday verbs ("pop ... in") and typos of the rules' verbs and nouns, read as the words they mean;
         one warning per word read otherwise (`spelling`). `names`: words written as names, left alone."""
-        words, everyday = spelling.everyday_verbs(words, self._verbs)
-        verbs = sorted(self._single_verbs | {v[0] for v in self._phrasal})
+        verbs = sorted(self._single_verbs | {v[0] for v in self._phrasal} | spelling.EVERYDAY_VERBS.keys())
         nouns = sorted({w for entry in vocabulary for w in entry.split()} | OBJECT_NOUNS)
         known = self._known_words | set(nouns) | set(names)
 
@@ -625,8 +634,9 @@ class OfflineDecomposer:
         # said would be dropped; unread, it stays a named object and is avoided.
         objects = [w for w in nouns if w not in _NON_OBJECTS]
         words, typos = spelling.correct_typos(words, is_known, verbs, objects)
-        warnings = [f"read '{c.said}' as '{c.read_as}'" for c in everyday]
-        warnings += [f"read '{c.said}' as '{c.read_as}' (a typo?)" for c in typos]
+        words, everyday = spelling.everyday_verbs(words, self._verbs)  # after typos: "deposti ... in"
+        warnings = [f"read '{c.said}' as '{c.read_as}' (a typo?)" for c in typos]
+        warnings += [f"read '{c.said}' as '{c.read_as}'" for c in everyday]
         return words, warnings
 
     def _mask_negated(self, words: list[str], parse: Parse) -> None:
@@ -1120,6 +1130,8 @@ class OfflineDecomposer:
                 continue  # "the neighbouring vase" is a vase
             if not nouns and not after_determiner and len(word) > 5 and word.endswith("ly"):
                 continue  # "especially the vase", "particularly the lamp": an adverb before the phrase
+            if word in UNITS and not nouns:
+                continue  # "the 2 litre jug": a measure (its number was no word) before the noun
             if word in POSITION_WORDS and not nouns and (word != "middle" or after_determiner):
                 position = POSITION_WORDS[word]
             elif word in COLOURS:
@@ -1550,6 +1562,15 @@ class OfflineDecomposer:
             declared_before = [k for k, _ in parse.declared if k < reference.index]
             declared_before += [k for k in avoided_at if k < reference.index]  # "..., don't touch that one" again
             if not others and declared_before:
+                k, last = max(((k, ref) for k, ref in parse.declared if k < reference.index), key=lambda d: d[0],
+                              default=(-1, None))
+                target = next((t for t in targets if last is not None and k > max(avoided_at, default=-1) and (
+                    last.name == t.ref().name or _short_for(last, t.ref())) and all(
+                    getattr(last, a) in (None, getattr(t.ref(), a)) for a in ("color", "size", "position"))), None)
+                if target is not None and not _is_care(reference.text):
+                    raise ContradictionError(  # "pour the bowl into the pan, mind the pan, don't touch it"
+                        instruction, f"'{reference.text}' means {target.ref().phrase}, which {skill.name} acts on; "
+                        "say which object to keep away from")
                 continue  # "the plate is in the way, so go around it": an obstacle already
             if not others:
                 # "there's dolls, teddy bears and toy cars about, go around them": objects only the mention finder
@@ -1650,7 +1671,10 @@ class OfflineDecomposer:
             cue = parse.cue_of.get(obstacle, "")
             if "between" in cue.split():
                 continue  # "the dustpan sits between the dog bed and the stand": where the target is, no caution
-            if not _is_care(cue):
+            # care for every object of the target's kind ("mind all the blocks") is care for the target too
+            every = any(ref == obstacle and parse.tokens[k : k + 1] in (["all"], ["every"], ["each"], ["any"])
+                        for k, ref in parse.declared)
+            if not _is_care(cue) or every:
                 raise ContradictionError(
                     instruction,
                     f"'{same[0].phrase}' is the object {skill.name} acts on, and '{cue or 'avoid'}' says to keep "

@@ -59,9 +59,11 @@ _PUT_PARTICLES = frozenset({"in", "into", "inside", "on", "onto", "back"})
 EVERYDAY_VERBS: dict[str, tuple[str, frozenset[str]]] = {
     **{
         word: ("put", _PUT_PARTICLES)
-        for word in "pop stick chuck toss throw plonk plop bung stuff lay load hide get tidy relocate park".split()
+        for word in "pop stick chuck toss throw plonk plop bung stuff lay load hide get tidy relocate park deposit stow"
+        .split()
     },
     "give": ("water", frozenset({"drink", "water"})),  # "give the plant a drink"
+    "hydrate": ("water", frozenset()),  # no particle needed: the verb alone says it
 }
 _NOUN_SLOTS = frozenset(
     """the a an this that these those my your our their his her its some any another each both either
@@ -74,6 +76,9 @@ _CLAUSE_STARTS = frozenset(
 )
 _NOUN_AFTER = frozenset("in into on onto to with from".split())
 _TRIGGER_CLAUSE_END = frozenset(". ; : ! ? , and then but while".split())
+
+
+_REVERSING_PREFIXES = frozenset({"re", "un", "de"})
 
 
 class Correction(NamedTuple):
@@ -112,6 +117,8 @@ def correct_word(word: str, choices: Sequence[str], substitution_from: int = 6) 
     if len(close) != 1:
         return None
     ((choice, _),) = close
+    if word[2:] == choice[2:] and {word[:2], choice[:2]} & _REVERSING_PREFIXES:
+        return None  # "recork" is no typo of "decork": a prefix that reverses the verb is another verb
     if len(word) == 3 and len(choice) < 4 and not _swap_of(word, choice):
         return None
     return choice
@@ -176,6 +183,10 @@ def everyday_verbs(words: Sequence[str], lexicon: Iterable[str]) -> tuple[list[s
         if reading is None or previous not in _CLAUSE_STARTS or reading[0] not in lexicon:
             continue
         verb, particles = reading
+        if not particles:
+            out[i] = verb
+            corrections.append(Correction(i, word, verb))
+            continue
         for k in range(i + 1, min(len(words), i + 10)):
             if words[k] in _TRIGGER_CLAUSE_END:
                 break
@@ -189,4 +200,6 @@ def everyday_verbs(words: Sequence[str], lexicon: Iterable[str]) -> tuple[list[s
 def suggest(word: str, choices: Sequence[str], cutoff: float = 70.0) -> str | None:
     """The closest of `choices` to an unknown `word` for a refusal's "did you mean", or None."""
     found = process.extractOne(word, choices, score_cutoff=cutoff)
+    if found and word[2:] == found[0][2:] and {word[:2], found[0][:2]} & _REVERSING_PREFIXES:
+        return None  # never "recork: did you mean decork?"
     return found[0] if found else None

@@ -297,6 +297,20 @@ DECLARED = [
     ("close the microwave, the cast-iron pot and the glass jar are fragile",
      ("close_microwave", ["microwave"], ["pot", "jar"])),
     ("open the drawer, mind the glass and the wine glass", ("open_drawer", ["drawer"], ["glass", "wine glass"])),
+    # found after the first runs of tables 20 and 21 (no longer held out): a colour whose noun comes with the next
+    # one, "the one" telling which, where things stand in a "there are" clause, events, vague words, openers
+    ("Stand the blue bottle upright, leave the red and the green bottles alone",
+     ("bottle_upright", ["blue bottle"], ["red bottle", "green bottle"])),
+    ("there are cups and a teapot around the bowl, pour it into the pan", ("bowl_pour", ["bowl", "pan"],
+                                                                             ["cup", "teapot"])),
+    ("put the phone on the dock, the white one", ("phone_on_base", ["phone", "white base"], [])),
+    ("open the drawer, the one on the right", ("open_drawer", ["right drawer"], [])),
+    ("stand the bottle up, it tipped over during the test", ("bottle_upright", ["bottle"], [])),
+    ("Right, the guests are coming. Close the microwave please", ("close_microwave", ["microwave"], [])),
+    ("open the drawer, mind the stuff next to the kettle", ("open_drawer", ["drawer"], ["kettle"])),
+    ("open the drawer, there is a lamp beside it that wobbles", ("open_drawer", ["drawer"], ["lamp"])),
+    ("sweep the dirt into the dustpan, mind the teeny vase and the many cups",
+     ("sweep_to_dustpan", ["broom", "dustpan"], ["small vase", "cup"])),
 ]  # fmt: skip
 
 
@@ -375,6 +389,7 @@ REFUSALS = [
     (NegatedCommandError, "Do not pour the bowl into the pan.", "'do not pour the bowl into the pan' asks the robot"),
     (NegatedCommandError, "never put the block in the drawer", "'never put the block in the drawer' asks the robot"),
     (NegatedCommandError, "water the plant no wait don't", "'don't water the plant' asks the robot"),  # taken back
+    (InstructionNotUnderstoodError, "put the green one in the drawer", "'the green one' refers to no object named"),
     (UnknownVerbError, "recork the bottle", "'recork' is not a verb any skill is asked for with (skills"),  # no "decork"
     (SeveralTasksError, "ensure the drawer is open and the microwave is shut", "it asks for two tasks"),
     (ContradictionError, "put the blue block in the drawer, careful, mind all the blocks", "'blue block' is the"),

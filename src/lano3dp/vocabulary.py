@@ -20,7 +20,7 @@ COLOURS = frozenset(
 )
 # Size words to one canonical word each, so "big bowl" finds an object whose size is "large".
 SIZE_WORDS = {
-    "small": "small", "little": "small", "tiny": "small", "mini": "small",
+    "small": "small", "little": "small", "tiny": "small", "mini": "small", "wee": "small", "teeny": "small",
     "large": "large", "big": "large", "huge": "large", "giant": "large",
     "medium": "medium", "mid": "medium", "middle": "medium",
     "tall": "tall", "short": "short",

@@ -268,8 +268,8 @@ def object_mentions(
     last_end = -1  # where the last noun phrase ended: "that" right there is a relative pronoun ("the bottle that fell")
     while i < n:
         word = words[i]
-        if word == "that" and i == last_end:
-            i += 1
+        if word == "that" and (i == last_end or _relative_verb(words, i + 1)):
+            i += 1  # "the bottle that fell", "a vase on the right of it that wobbles"
             continue
         if word in _SWEEP_VERBS and (words[i - 1] if i else ",") in _CLAUSE_START:
             i = _after_swept(words, i + 1, known, verbs)  # "sweep the sand ...": what is swept is no object
@@ -292,6 +292,8 @@ def object_mentions(
             found = _mention(words, i, j, end, known, permitted)
             if found is not None and i and words[i - 1] in _SPILLED and found.head not in OBJECT_NOUNS:
                 found = None  # "I spilled some flour, can you sweep it up": what was spilled is dirt, no object
+            if found is not None and i and words[i - 1] in ("during", "throughout", "since"):
+                found = None  # "it fell over during the last run": an event, no object
             if found is not None and _person_who_did(found, words, end):
                 found = None  # "my son made a mess": who did something earlier is no object on the table
             if found is not None and not _possessor(words, j, end, known, verbs):
@@ -386,7 +388,10 @@ MATERIALS = frozenset(
     velvet linen wicker bamboo copper brass aluminium aluminum enamel suede satin nylon denim terracotta pewter
     bronze stainless glass foam cast iron""".split()
 )  # "glass", "iron" name things alone ("the glass"); before a noun they say what it is made of
-_PRONOUNS_BEFORE_IS = frozenset("that it there here what who he she this where which".split())
+_PRONOUNS_BEFORE_IS = frozenset(
+    "that it there here what who he she this where which whatever whoever something anything everything nothing"
+    .split()
+)
 _ADJECTIVES = frozenset(
     """open closed shut empty full dirty clean old new broken cracked upright fallen lying standing tipped wet dry
     hot cold warm heavy light glass paper iron rubber fragile delicate shiny dull round square flat tall short big
@@ -598,6 +603,14 @@ _HOLDERS = frozenset("stand rack holder tray mat stool basket bed".split())
 _PLURAL_SUBJECT_VERBS = frozenset(
     "look seem appear contain hold stay remain sit stand lie belong need go wobble rattle leak tip break fall".split()
 )
+
+
+def _relative_verb(words: Sequence[str], i: int) -> bool:
+    """words[i] is the verb of a relative clause with no object ("... that wobbles.", "that tips over")."""
+    word = words[i] if i < len(words) else ""
+    following = words[i + 1] if i + 1 < len(words) else "."
+    return word.endswith("s") and "VERB" in word_classes(word) and (
+        following in _CLAUSE_END or following in _PARTICLES_AFTER_VERBS or following.endswith("ly"))
 
 
 def _verb_with_object(words: Sequence[str], i: int) -> bool:

@@ -89,7 +89,7 @@ _SENTENCE_END = frozenset(".;:!?")
 _CLITICS = ("'s", "'re", "'m", "'ve", "'ll", "'d")  # "they're" -> they 're: the pronoun stays a pronoun
 DETERMINERS = frozenset(
     """the a an this that these those its my your our their his her some any another both either each every
-    all two three four five six seven eight nine ten few several whichever""".split()
+    all two three four five six seven eight nine ten few several many numerous various whichever""".split()
 )
 # Position words, kept as said; like colours they narrow which instance is meant ("the top drawer").
 POSITION_WORDS = {
@@ -113,7 +113,7 @@ _NON_OBJECTS = frozenset(
     """left right side top bottom middle front back edge corner table counter way time contents content
     water liquid soup stuff one ones area spot place workspace dirt dust crumb crumbs trash mess debris
     cork lid door what thing everything something nothing anything robot okay ok sure bit path route deal problem
-    idea chance mistake distance space house home whatever""".split()
+    idea chance mistake distance space house home whatever things""".split()
 ) | UNITS
 # Said where an object could be, naming none: "obstacles: none", "be a dear", "..., won't you?"
 _TAGS = frozenset("none dear won't wouldn't isn't aren't".split())
@@ -493,7 +493,14 @@ class OfflineDecomposer:
         words = _front_positions(_declared_placements(_contact_cues(words)))
         words, shorthand = self._shorthand_placements(words, vocabulary)
         read_as += shorthand
+        words = _appositives(words)
         words = self._resolve_one_anaphora(words, vocabulary)  # first: "leave the green one" names a green bowl
+        unresolved = next((i for i, w in enumerate(words) if w in ("one", "ones") and i >= 2 and words[i - 1] in (
+            COLOURS | SIZE_WORDS.keys()) and words[i - 2] in DETERMINERS), None)
+        if unresolved is not None:  # "put the pink one on the base": never any phone for the pink one
+            raise InstructionNotUnderstoodError(
+                instruction, f"'{' '.join(words[unresolved - 2 : unresolved + 1])}' refers to no object named before "
+                "it; name the object")
         mentions = object_mentions(words, [*self._vocabulary, *scene_kinds], self._single_verbs)
         parse = Parse(tokens=list(words), warnings=[*normalized.warnings, *read_as], mentions=mentions)
         self._mask_negated(words, parse)
@@ -809,6 +816,10 @@ class OfflineDecomposer:
         while i < len(words):
             match = self._vocabulary_match(words, i, vocabulary)
             length = len(match.split()) if match else 1
+            if match is not None and words[i] in self._single_verbs and (not i or words[i - 1] in _TASK_BREAKS) and (
+                words[i + 1 : i + 2] and words[i + 1] in DETERMINERS
+            ):
+                match = None  # "Dock the pink one on the base": a verb before its object, not a dock
             if match is None:
                 previous = words[i - 1] if i else ""
                 word = words[i]
@@ -838,6 +849,11 @@ class OfflineDecomposer:
                 words[i - 1].endswith("ed") and words[i - 1] not in ("steered", "navigated", "moved", "worked")
             )):
                 cue = None  # "three monitors are crowded around the microwave": where they are, not a caution
+            before = words[i - 1] if i else ","
+            noun_before = singular(before) in OBJECT_NOUNS or singular(before) != before and "NOUN" in word_classes(
+                singular(before)) or word_classes(before) == {"NOUN"}
+            if cue == ("around",) and noun_before and _after_existential(words, i):
+                cue = None  # "there are five jars and two mugs around the bowl": where they are
             if cue is None:
                 i += 1
                 continue
@@ -1919,8 +1935,14 @@ def _polite_requests(words: list[str]) -> list[str]:
 
 
 def _colour_phrases(words: list[str]) -> list[str]:
-    """ "the phone of grey colour", "a cup in red colour" -> "the grey phone", "a red cup"."""
+    """ "the phone of grey colour", "a cup in red colour" -> "the grey phone", "a red cup"; "the red and the blue
+    bottles" -> "the red bottle and the blue bottles": a colour whose noun is said only with the next one."""
     out = list(words)
+    for i in range(len(out) - 5, -1, -1):
+        if out[i] in ("the", "a") and out[i + 1] in COLOURS and out[i + 2] in ("and", "or") and out[i + 3] == "the" and (
+            out[i + 4] in COLOURS and out[i + 5].isalpha() and out[i + 5] not in _BOUNDARY | _MODIFIERS
+        ):
+            out[i + 2 : i + 2] = [singular(out[i + 5])]
     i = 1
     while i + 2 < len(out):
         k = i + 1 + (out[i + 1] in ("a", "the"))
@@ -2023,6 +2045,58 @@ def _quantities(words: list[str]) -> list[str]:
     return out
 
 
+def _after_existential(words: Sequence[str], i: int) -> bool:
+    """words[i] is in a "there is/are ..." clause, after its nouns ("there are two mugs around the bowl")."""
+    k = i - 1
+    while k > 0 and words[k] not in _SENTENCE_END and words[k] not in _CLAUSE_ENDS:
+        k -= 1
+    start = k + 1 if words[k] in _SENTENCE_END or words[k] in _CLAUSE_ENDS else 0
+    for j in range(start, i - 1):
+        if words[j] in ("there", "theres") and (words[j] == "theres" or words[j + 1] in _COPULAS):
+            return i - j > 2
+    return False
+
+
+def _appositives(words: list[str]) -> list[str]:
+    """ "put the phone on the dock, the black one", "pull the drawer open, the one at the top": "the one" said
+    right after a noun phrase tells which it is; its colour, size or side goes before that noun."""
+    out = list(words)
+    i = 0
+    while i < len(out):
+        if out[i] != "," or not i or not out[i - 1].isalpha() or out[i - 1] in _BOUNDARY | DETERMINERS | _MODIFIERS:
+            i += 1
+            continue
+        if out[i + 1 : i + 2] != ["the"]:
+            i += 1  # "mind the metronome, little one, ...": a name for the robot
+            continue
+        k = i + 2
+        said = []
+        while k < len(out) and out[k] in _MODIFIERS:
+            said.append(out[k])
+            k += 1
+        if out[k : k + 1] != ["one"]:
+            i += 1
+            continue
+        end = k + 1
+        if out[end : end + 2] in (["at", "the"], ["on", "the"], ["in", "the"]) and out[end + 2 : end + 3] and out[
+            end + 2
+        ] in POSITION_WORDS:  # "the one at the top", "the one on the left"
+            said.append(out[end + 2])
+            end += 3
+        if not said or (end < len(out) and out[end] not in _CLAUSE_CLOSE):
+            i += 1
+            continue
+        noun_start = i - 1
+        while noun_start > 0 and out[noun_start - 1] not in DETERMINERS and out[noun_start - 1].isalpha() and (
+            out[noun_start - 1] not in _BOUNDARY
+        ):
+            noun_start -= 1
+        out[i:end] = []
+        out[noun_start:noun_start] = said
+        i = end
+    return out
+
+
 def _without_disfluencies(tokens: list[str]) -> list[str]:
     """Fillers ("um", "uh") and words said twice in a row ("the the", "on the on the") dropped, as dictated speech
     has them. A filler that ends a noun phrase after a determiner is a noun the user named ("avoid the rofl"),
@@ -2032,6 +2106,8 @@ def _without_disfluencies(tokens: list[str]) -> list[str]:
         following = tokens[k + 1] if k + 1 < len(tokens) else "."
         if word in _FILLERS and not (out and out[-1] in DETERMINERS and following in _CLAUSE_CLOSE):
             continue
+        if word in ("right", "alright") and following == "," and (not out or out[-1] in _SENTENCE_END):
+            continue  # "Right, guests arrive at 7 ...": a word that opens the talk, no side and no verb
         out.append(word)
         for n in (1, 2):  # a determiner or a preposition said again: "the the", "on the on the"
             if len(out) >= 2 * n and out[-n:] == out[-2 * n : -n] and out[-1] in DETERMINERS | _BOUNDARY and all(

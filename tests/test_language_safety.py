@@ -311,6 +311,13 @@ DECLARED = [
     ("open the drawer, there is a lamp beside it that wobbles", ("open_drawer", ["drawer"], ["lamp"])),
     ("sweep the dirt into the dustpan, mind the teeny vase and the many cups",
      ("sweep_to_dustpan", ["broom", "dustpan"], ["small vase", "cup"])),
+    ("could you put the laptop charger in the drawer?", ("put_item_in_drawer", ["laptop charger", "drawer"], [])),
+    ("open the drawer, keep away from the coffee table book and the mic stand on the left",
+     ("open_drawer", ["drawer"], ["coffee table book", "left mic stand"])),
+    ("the green bottle stand upright please", ("bottle_upright", ["green bottle"], [])),
+    ("close the microwave, my 3 year old keeps opening it", ("close_microwave", ["microwave"], [])),
+    ("open the drawer, my son put a cup there", ("open_drawer", ["drawer"], ["cup"])),  # not "put son in drawer"
+    ("my flatmate set it up yesterday, please close the microwave", ("close_microwave", ["microwave"], [])),
 ]  # fmt: skip
 
 
@@ -390,6 +397,8 @@ REFUSALS = [
     (NegatedCommandError, "never put the block in the drawer", "'never put the block in the drawer' asks the robot"),
     (NegatedCommandError, "water the plant no wait don't", "'don't water the plant' asks the robot"),  # taken back
     (InstructionNotUnderstoodError, "put the green one in the drawer", "'the green one' refers to no object named"),
+    (InstructionNotUnderstoodError, "put the dog in the drawer", "'dog' is a person or an animal; put_item_in_drawer"),
+    (UnknownVerbError, "I put the block in the drawer", "no task is asked for: 'put' here says what happened"),
     (UnknownVerbError, "recork the bottle", "'recork' is not a verb any skill is asked for with (skills"),  # no "decork"
     (SeveralTasksError, "ensure the drawer is open and the microwave is shut", "it asks for two tasks"),
     (ContradictionError, "put the blue block in the drawer, careful, mind all the blocks", "'blue block' is the"),

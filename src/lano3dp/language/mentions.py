@@ -522,12 +522,18 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
         more = _known_at(words, end, known)
         if word == "can" and _modal_can(words, end):
             break  # "the mug can be moved", "the mitt can both be touched": a modal verb
-        if word in _HOLDERS and end > j and words[end + 1 : end + 2] in [*_SENTENCE_ENDS, [","], ["and"],
-                                                                           *_BEFORE_A_MODAL]:
-            end += 1  # "the umbrella stand.": a holder heads the compound, though "stand" is also a verb
+        if word in _HOLDERS and end > j and (words[end + 1 : end + 2] in [*_SENTENCE_ENDS, [","], ["and"],
+                                                                            *_BEFORE_A_MODAL]
+                                             or word == "stand" and not _plural_noun(words[end - 1]) and words[
+                                                 end + 1 : end + 2] not in _AFTER_STAND_VERB):
+            # "the umbrella stand.", "the soldering iron stand on the left": a holder heads the compound, though
+            # "stand" is also a verb (not after a plural: "the cups stand on the left")
+            end += 1
             continue
-        if end > j and (singular(words[end - 1]) in _PEOPLE and word.endswith("s") and "VERB" in word_classes(word)):
+        if end > j and (singular(words[end - 1]) in PEOPLE and word.endswith("s") and "VERB" in word_classes(word)):
             break  # "before my mum visits": a person's verb, not a "mum visit"
+        if word == "old" and end > j and words[end - 1] in ("year", "years", "month", "months"):
+            return end + 1  # "my 2 year old keeps grabbing it": a child (its number was no word), no object
         if end > j and _verb_with_object(words, end):
             break  # "the mug blocks the way", "the cat knocks it": the verb after its subject, with its object
         if end > j and (word in ("avoid", "mind", "beware") or word in ("watch", "look") and words[end + 1 : end + 2]
@@ -558,9 +564,10 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
     return end
 
 
+_AFTER_STAND_VERB = [[w] for w in "up upright it them back the a this that".split()]  # "stand it upright"
 _OWNED_BY = frozenset({("belongs", "to"), ("belong", "to"), ("belonged", "to"), ("belonging", "to")})
 # People, as the subject of what they did ("my roommate knocked it over"); a person said to be near is avoided.
-_PEOPLE = frozenset(
+PEOPLE = frozenset(
     """son daughter kid child children mom mum dad mother father brother sister wife husband partner roommate
     flatmate housemate neighbour neighbor friend boss colleague grandma grandpa grandmother grandfather aunt uncle
     cousin baby toddler guest visitor cleaner nanny teacher someone somebody everyone nobody parent grandparent
@@ -579,7 +586,7 @@ def named_in_passing(name: str, words: Sequence[str], start: int, end: int) -> b
 
 def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
     """ "my son made a mess", "my roommate has left it open": a person who did something is named in passing."""
-    if mention.head not in _PEOPLE and singular(mention.head) not in _PEOPLE:
+    if mention.head not in PEOPLE and singular(mention.head) not in PEOPLE:
         return False
     following = words[end : end + 2]
     if following[:1] in (["are"], ["is"], ["'re"]) and following[1:] and following[1] in _ON_THEIR_WAY:
@@ -590,6 +597,12 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
         following[0]
     ):
         return True  # "before my mum visits", "my son leaves it lying around": a person doing something
+    if len(following) == 2 and following[1] in ("you", "it", "them", "me", "us") and following[0].isalpha() and (
+        "VERB" in word_classes(following[0])
+    ):
+        return True  # "my partner set you up", "my son put it there": a verb with its object
+    if following and following[0].isalpha() and same_participle(following[0]) and following[1:2] != ["to"]:
+        return True  # "my son put a cup there": a verb whose past is its base
     return bool(following) and following[0].isalpha() and past_verb_form(following[0])
 
 

@@ -56,6 +56,7 @@ from lano3dp.language.mentions import (
     DESCRIBING,
     MATERIALS,
     NOT_OBJECTS,
+    PEOPLE,
     SUBJECT_VERBS,
     UNITS,
     Mention,
@@ -202,6 +203,7 @@ _PASSIVE_MODALS = frozenset(
     "is are to should must shall needs need has have ought will would can could not never also please".split()
 )
 _STATE_WORDS = frozenset("open shut closed upright".split())
+_NARRATORS = frozenset("i he she they we someone somebody".split())  # subjects of what was done, never "you"
 # A state asked for with "ensure ... is": the skill's verb that makes it ("ensure the bottle is upright").
 _ENSURED_STATES = {"open": ("open",), "shut": ("shut",), "upright": ("stand", "upright")}
 _KEEPING = frozenset("leave left leaving leaves keep kept keeping keeps found find".split())
@@ -1113,6 +1115,14 @@ class OfflineDecomposer:
             if word in _COMPOUND_MODIFIERS and not nouns and following not in _BOUNDARY | _NON_OBJECTS | _SENTENCE_END:
                 nouns.append(word)  # "the water bottle", "the table lamp"
                 continue
+            if word == "stand" and nouns and singular(nouns[-1]) == nouns[-1]:
+                nouns.append(word)  # "the soldering iron stand": a holder after a singular noun
+                continue
+            if nouns and word in _NON_OBJECTS and following.isalpha() and following not in _BOUNDARY | _NON_OBJECTS and (
+                "NOUN" in word_classes(following) or following in OBJECT_NOUNS
+            ) and word in ("table", "counter", "door", "side"):
+                nouns.append(word)  # "the coffee table book", "the side door key": inside a compound
+                continue
             if nouns and (word in _STANCE or word in SUBJECT_VERBS or word.endswith("ing") and len(word) > 4):
                 break  # "the phone case lying next to it", "the vase stays put": a verb ends the noun phrase
             if nouns and word in _DETACHABLE:
@@ -1218,6 +1228,12 @@ class OfflineDecomposer:
                 continue
             if word == "right" and following in _RIGHT_AS_ADVERB_BEFORE:
                 continue  # "a vase right next to the drawer", "right there": an adverb, not "right the bottle"
+            if same_participle(word) and (singular(previous) in PEOPLE or previous in _NARRATORS):
+                continue  # "my son put a cup there", "I set it down": what someone did, not a request
+            if word == "stand" and after_noun and singular(previous) == previous and following not in (
+                "up", "upright", "it", "them", "back", "the", "a", "this", "that"
+            ) and any(w in DETERMINERS for w in task[max(0, i - 4) : i - 1]):
+                continue  # "a soldering iron stand on the left": a holder named after what it holds
             if hits:
                 parse.verbs.append(sorted(hits)[0])
                 parse.verb_at.append((i, sorted(hits)[0]))
@@ -1426,6 +1442,10 @@ class OfflineDecomposer:
                 instruction,
                 f"no skill fits: it has no verb that asks for a task (skills are asked for with: {examples})",
             )
+        if lemmas(word) & self._single_verbs:  # "I put the block in the drawer": told, not asked
+            raise UnknownVerbError(
+                instruction, f"no task is asked for: '{word}' here says what happened or how things are, not what "
+                f"to do; ask for it as a command (skills are asked for with: {examples})")
         guess = spelling.suggest(word, sorted(self._single_verbs))
         hint = f"; did you mean '{guess}'?" if guess else ""
         raise UnknownVerbError(
@@ -1459,7 +1479,11 @@ class OfflineDecomposer:
             for w in slot.synonyms
         }
         for noun, wildcard in assigned.values():
-            if wildcard and noun.name in fixtures:
+            # a compound names another thing of its own ("the phone charger" is carried, "the charger" is a base)
+            if wildcard and singular(noun.name) in PEOPLE:
+                raise InstructionNotUnderstoodError(instruction, f"'{noun.name}' is a person or an animal; "
+                                                    f"{skill.name} moves objects only")
+            if wildcard and noun.name in fixtures and (not noun.compound or f"{noun.compound} {noun.name}" in fixtures):
                 raise InstructionNotUnderstoodError(instruction, f"'{noun.name}' cannot be carried by {skill.name}")
         carried = skill.carried_slot
         for k, (noun, _) in assigned.items():

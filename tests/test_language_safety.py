@@ -318,6 +318,11 @@ DECLARED = [
     ("close the microwave, my 3 year old keeps opening it", ("close_microwave", ["microwave"], [])),
     ("open the drawer, my son put a cup there", ("open_drawer", ["drawer"], ["cup"])),  # not "put son in drawer"
     ("my flatmate set it up yesterday, please close the microwave", ("close_microwave", ["microwave"], [])),
+    # "the others" / "the rest" beside a target are the other objects of its kind, never the target itself
+    ("put the pink phone on the base, leave the others be", ("phone_on_base", ["pink phone", "base"],
+                                                             ["other phone"])),
+    ("stand the red bottle upright, don't touch the rest", ("bottle_upright", ["red bottle"], ["other bottle"])),
+    ("close the microwave. back drawer is stuck, leave it be", ("close_microwave", ["microwave"], ["back drawer"])),
 ]  # fmt: skip
 
 

@@ -141,8 +141,8 @@ _PARTICLES = frozenset("over into against with on off near to close next too by 
 _PRONOUNS = {
     ("it",): "it", ("that",): "it", ("this",): "it", ("that", "one"): "it", ("this", "one"): "it",
     ("them",): "them", ("those",): "them", ("these",): "them", ("they",): "them", ("both",): "them",
-    ("the", "other"): "other", ("the", "other", "one"): "other", ("the", "others"): "them",
-    ("the", "other", "ones"): "them", ("other",): "other",
+    ("the", "other"): "other", ("the", "other", "one"): "other", ("the", "others"): "other",
+    ("the", "other", "ones"): "other", ("other",): "other", ("others",): "other", ("the", "rest"): "other",
 }  # fmt: skip
 _LIST_SEPARATORS = frozenset({"and", "or", ",", "nor", "plus"})
 _CLAUSE_ENDS = frozenset({"then", "while", "but", "before", "after", "when", "so", "once", "until", "because"})
@@ -972,7 +972,9 @@ class OfflineDecomposer:
                 start, end = self._subject_before(words, k)
                 if start < end:
                     spans.append((start, end, start, i + 1, " ".join(words[start : i + 1])))
-            elif words[i] == "alone" and "leave" in words[max(0, i - 8) : i]:
+            elif (words[i] == "alone" or words[i] == "be" and (i + 1 == len(words) or words[i + 1] in _CLAUSE_CLOSE)) and (
+                "leave" in words[max(0, i - 8) : i]
+            ):  # "leave the vase alone", "leave the others be"
                 leave = max(k for k in range(max(0, i - 8), i) if words[k] == "leave")
                 spans.append((leave + 1, i, leave, i + 1, " ".join(words[leave : i + 1])))
         return spans
@@ -1374,8 +1376,10 @@ class OfflineDecomposer:
         j = i - 1
         while j >= 0 and task[j] in _MODIFIERS:
             if task[j] in POSITION_WORDS:
-                if j and (task[j - 1] in DETERMINERS or task[j - 1] in _MODIFIERS):
-                    position = position or POSITION_WORDS[task[j]]  # "the top drawer", not "right the bottle"
+                opens = (not j or task[j - 1] in _SENTENCE_END or task[j - 1] == ",") and task[j] not in ("left", "right")
+                if j and (task[j - 1] in DETERMINERS or task[j - 1] in _MODIFIERS) or opens:
+                    # "the top drawer", "bottom drawer is jammed"; not "right the bottle", "left it open"
+                    position = position or POSITION_WORDS[task[j]]
             elif task[j] in COLOURS:
                 color = color or canonical_attribute(task[j])
             else:

@@ -323,6 +323,18 @@ DECLARED = [
                                                              ["other phone"])),
     ("stand the red bottle upright, don't touch the rest", ("bottle_upright", ["red bottle"], ["other bottle"])),
     ("close the microwave. back drawer is stuck, leave it be", ("close_microwave", ["microwave"], ["back drawer"])),
+    # found by the blind table 23 (hurried and non-native phrasing): present continuous requests, a permission
+    # to move an object is no task, a caution after the object, a side after the noun, a name typed as one word
+    ("you are closing the microwave now please", ("close_microwave", ["microwave"], [])),
+    ("open the drawer, it is allowed to move the box", ("open_drawer", ["drawer"], [])),  # was: box put in drawer
+    ("you can move the block into the drawer", ("put_item_in_drawer", ["block", "drawer"], [])),
+    ("open the drawer, the lamp no touching", ("open_drawer", ["drawer"], ["lamp"])),
+    ("close the microwave, careful for the teapot at the left side", ("close_microwave", ["microwave"],
+                                                                       ["left teapot"])),
+    ("open the bottle on the middle", ("open_wine_bottle", ["middle bottle"], [])),
+    ("block put in drawer, the top one", ("put_item_in_drawer", ["block", "top drawer"], [])),
+    ("put the blue bottle in the drawer quick", ("bottle_in_drawer", ["blue bottle", "drawer"], [])),
+    ("water the fern with the wateringcan", ("water_plants", ["watering can", "plant"], [])),
 ]  # fmt: skip
 
 
@@ -404,6 +416,9 @@ REFUSALS = [
     (InstructionNotUnderstoodError, "put the green one in the drawer", "'the green one' refers to no object named"),
     (InstructionNotUnderstoodError, "put the dog in the drawer", "'dog' is a person or an animal; put_item_in_drawer"),
     (UnknownVerbError, "I put the block in the drawer", "no task is asked for: 'put' here says what happened"),
+    (NegatedCommandError, "please no open the drawer", "'no open the drawer' asks the robot not to do something"),
+    (NegatedCommandError, "you not pour the bowl today", "'not pour the bowl today' asks the robot"),
+    (ContradictionError, "put the phone on the base, phones no touching", "'phone' is the object phone_on_base"),
     (UnknownVerbError, "recork the bottle", "'recork' is not a verb any skill is asked for with (skills"),  # no "decork"
     (SeveralTasksError, "ensure the drawer is open and the microwave is shut", "it asks for two tasks"),
     (ContradictionError, "put the blue block in the drawer, careful, mind all the blocks", "'blue block' is the"),

@@ -136,7 +136,9 @@ _AFTER_PLURAL_HEAD = _PHRASE_ENDS | frozenset("all around everywhere nearby are 
 _RELATIONAL_ADJECTIVES = frozenset("neighbouring neighboring adjacent nearby".split())
 _PERSONAL_PRONOUNS = frozenset("i you we he she they me him us myself yourself ourselves itself themselves".split())
 # Words after an object word that are not the head of a compound with it ("water the plant today").
-_NOT_HEADS = frozenset("today tonight tomorrow again first too also instead yet still already soon later".split())
+_NOT_HEADS = frozenset(
+    "today tonight tomorrow again first too also instead yet still already soon later quick fast asap pronto".split()
+)
 _PARTICLES = frozenset("over into against with on off near to close next too by past around of".split())
 _PRONOUNS = {
     ("it",): "it", ("that",): "it", ("this",): "it", ("that", "one"): "it", ("this", "one"): "it",
@@ -203,6 +205,9 @@ _PASSIVE_MODALS = frozenset(
     "is are to should must shall needs need has have ought will would can could not never also please".split()
 )
 _STATE_WORDS = frozenset("open shut closed upright".split())
+_PERMITTING = frozenset(
+    (w, "to") for w in "allowed permitted ok okay fine alright free".split()
+)  # "it is allowed to move the box": before a contact verb, a permission
 _NARRATORS = frozenset("i he she they we someone somebody".split())  # subjects of what was done, never "you"
 # A state asked for with "ensure ... is": the skill's verb that makes it ("ensure the bottle is upright").
 _ENSURED_STATES = {"open": ("open",), "shut": ("shut",), "upright": ("stand", "upright")}
@@ -230,7 +235,7 @@ _QUANTIFIED = frozenset("any all each every either none both neither".split())  
 _CUES: tuple[tuple[str, ...], ...] = (
     ("avoid",), ("avoiding",), ("avoids",), ("around",), ("dodge",), ("dodging",),
     ("without", "<ing>"), ("no", "<ing>"), ("careful", "not", "to", "<hit>"), ("careful", "of"),
-    ("careful", "with"), ("careful", "around"), ("careful", "near"), ("watch", "out", "for"),
+    ("careful", "with"), ("careful", "around"), ("careful", "near"), ("careful", "for"), ("watch", "out", "for"),
     ("look", "out", "for"), ("beware", "of"), ("mind",), ("clear", "of"), ("away", "from"),
     ("distance", "from"), ("far", "from"), ("nowhere", "near"), ("not", "to", "<hit>"), ("don't", "<hit>"),
     ("dont", "<hit>"), ("not", "<hit>"), ("never", "<hit>"), ("but", "not"), ("and", "not"),
@@ -632,6 +637,10 @@ class OfflineDecomposer:
     ) -> tuple[list[str], list[str]]:
         """Everyday verbs ("pop ... in") and typos of the rules' verbs and nouns, read as the words they mean;
         one warning per word read otherwise (`spelling`). `names`: words written as names, left alone."""
+        joined = {entry.replace(" ", ""): entry.split() for entry in vocabulary if " " in entry}
+        joined = {w: parts for w, parts in joined.items() if w not in vocabulary and w not in self._known_words}
+        if joined.keys() & set(words):  # "the wateringcan": a known two-word name typed as one word
+            words = [part for w in words for part in joined.get(w, [w])]
         verbs = sorted(self._single_verbs | {v[0] for v in self._phrasal} | spelling.EVERYDAY_VERBS.keys())
         nouns = sorted({w for entry in vocabulary for w in entry.split()} | OBJECT_NOUNS)
         known = self._known_words | set(nouns) | set(names)
@@ -664,6 +673,11 @@ class OfflineDecomposer:
                 or word == "no" and words[i + 1 : i + 2] == [_NEGATING_BEFORE["no"]]
                 or word == "off" and i and words[i - 1] == _NEGATING_BEFORE["off"]
                 or word in ("isn't", "not") and words[i + 1 : i + 2] != [] and words[i + 1] in _UNNEEDED
+                # "please no open the drawer", "you not water the plant": a bare "no" or "not" before a task
+                # verb's base form (not a state after a copula: "it is not open")
+                or word in ("no", "not") and i + 1 < len(words) and self._is_task_verb(words[i + 1]) and (
+                    not i or words[i - 1] not in _COPULAS) and not past_verb_form(words[i + 1]) and not words[
+                    i + 1].endswith("ing")
             )
             if not negates:
                 continue
@@ -875,12 +889,15 @@ class OfflineDecomposer:
                 if contrast and end > start and (words[end] == "," or words[end] in _DESTINATIONS | {"to"}):
                     break
                 end += 1
-            if "<hit>" in cue and not any(w.isalpha() for w in words[start:end]):
-                # "the cup do not touch", "the bottle never touching": the object said before the cue
+            if ("<hit>" in cue or cue == ("no", "<ing>")) and not any(w.isalpha() for w in words[start:end]):
+                # "the cup do not touch", "the bottle never touching", "phones no touching": the object said
+                # before the cue
                 before = i
                 while before > 0 and words[before - 1] not in _SENTENCE_END | {",", "but", "and"}:
                     before -= 1
-                if before < i and any(w in DETERMINERS for w in words[before:i]):
+                if before < i and (any(w in DETERMINERS for w in words[before:i]) or singular(words[i - 1]) in (
+                    OBJECT_NOUNS
+                )) and not any(self._is_task_verb(w) for w in words[before:i]):
                     spans.append((before, i, " ".join(cue_words)))
                     for j in range(i, start):
                         words[j] = ","
@@ -1216,7 +1233,7 @@ class OfflineDecomposer:
                 continue  # "the vase stays put": it is to remain where it is, not a request to put something
             if tuple(task[i - 2 : i]) in _SEQUENCE_OPENERS:
                 previous = ","  # "after that open it": "that" is no determiner there
-            if previous in ("first", "last") and (i < 2 or task[i - 2] in _TASK_BREAKS):
+            if previous in ("first", "second", "third", "last", "next") and (i < 2 or task[i - 2] in _TASK_BREAKS):
                 previous = ","  # "first stand the bottle up": an adverb opening the clause, not "the first drawer"
             if previous in DETERMINERS or previous in COLOURS or previous in POSITION_WORDS or previous in _COPULAS:
                 continue
@@ -1230,6 +1247,11 @@ class OfflineDecomposer:
                 continue
             if word == "right" and following in _RIGHT_AS_ADVERB_BEFORE:
                 continue  # "a vase right next to the drawer", "right there": an adverb, not "right the bottle"
+            permission = tuple(task[max(0, i - 2) : i]) in _PERMITTING or previous in ("may", "can")
+            if permission and lemmas(word) & _COLLISION_VERBS & _GENERIC_VERBS and not _DESTINATIONS & set(
+                task[i + 1 : next((k for k in range(i + 1, len(task)) if task[k] in _CLAUSE_CLOSE), len(task))]
+            ):
+                continue  # "it is allowed to move the box", "you may push the mug": contact permitted, no task
             if same_participle(word) and (singular(previous) in PEOPLE or previous in _NARRATORS):
                 continue  # "my son put a cup there", "I set it down": what someone did, not a request
             if word == "stand" and after_noun and singular(previous) == previous and following not in (
@@ -1945,6 +1967,8 @@ _POST_POSITIONS = {
     ("in", "the", "front"): "front", ("on", "the", "bottom"): "bottom", ("in", "the", "middle"): "middle",
     ("in", "the", "centre"): "centre", ("in", "the", "center"): "center", ("nearest",): "nearest",
     ("closest",): "closest", ("farthest",): "farthest", ("furthest",): "furthest",
+    ("on", "the", "middle"): "middle", ("at", "the", "middle"): "middle",
+    **{(at, "the", side, "side"): side for at in ("on", "at", "to") for side in ("left", "right")},
 }  # fmt: skip
 
 
@@ -1957,6 +1981,10 @@ def _polite_requests(words: list[str]) -> list[str]:
             out[i] = "please"
         if out[i - 1] == "let" and out[i] in ("'s", "us") and (i < 2 or out[i - 2] in _TASK_BREAKS):
             out[i - 1 : i + 1] = [",", "please"]  # "let's open the bottle" asks for it
+        if out[i - 1] == "you" and out[i] in ("are", "'re") and out[i + 1].endswith("ing") and (
+            i < 2 or out[i - 2] in _TASK_BREAKS or out[i - 2] in _POLITE
+        ):
+            out[i - 1 : i + 1] = [",", "please"]  # "you are opening the drawer now please": a request
         if out[i - 1] == "come" and out[i] == "on" and (i < 2 or out[i - 2] in _TASK_BREAKS):
             out[i - 1 : i + 1] = [",", "please"]  # "come on, ...": encouragement, not a verb of moving
     return out
@@ -2120,7 +2148,7 @@ def _appositives(words: list[str]) -> list[str]:
         ):
             noun_start -= 1
         out[i:end] = []
-        out[noun_start:noun_start] = said
+        out[noun_start:noun_start] = said if out[noun_start - 1] in DETERMINERS else ["the", *said]  # "in drawer"
         i = end
     return out
 

@@ -335,6 +335,15 @@ DECLARED = [
     ("block put in drawer, the top one", ("put_item_in_drawer", ["block", "top drawer"], [])),
     ("put the blue bottle in the drawer quick", ("bottle_in_drawer", ["blue bottle", "drawer"], [])),
     ("water the fern with the wateringcan", ("water_plants", ["watering can", "plant"], [])),
+    # found by the blind table 22's first run: a permitted object is never the one carried (was a swap), nor
+    # refused as out of place; what a person left is named after "left"; a compound before its plural head
+    ("the mug can be moved, put the sponge in the drawer", ("put_item_in_drawer", ["sponge", "drawer"], [])),
+    ("close the microwave, no worries if you knock the fruit bowl", ("close_microwave", ["microwave"], [])),
+    ("open the drawer, my daughter left crayons and marbles everywhere", ("open_drawer", ["drawer"],
+                                                                          ["crayon", "marble"])),
+    ("open the drawer, there are tape measures and rulers around it", ("open_drawer", ["drawer"],
+                                                                       ["tape measure", "ruler"])),
+    ("sit the phone on the dock", ("phone_on_base", ["phone", "base"], [])),
 ]  # fmt: skip
 
 
@@ -419,6 +428,8 @@ REFUSALS = [
     (NegatedCommandError, "please no open the drawer", "'no open the drawer' asks the robot not to do something"),
     (NegatedCommandError, "you not pour the bowl today", "'not pour the bowl today' asks the robot"),
     (ContradictionError, "put the phone on the base, phones no touching", "'phone' is the object phone_on_base"),
+    (NegatedCommandError, "do not, whatever happens, open the drawer", "asks the robot not to do something"),
+    (InstructionNotUnderstoodError, "slide the block onto the stool", "'onto the stool' is not where put_item_in_drawer"),
     (UnknownVerbError, "recork the bottle", "'recork' is not a verb any skill is asked for with (skills"),  # no "decork"
     (SeveralTasksError, "ensure the drawer is open and the microwave is shut", "it asks for two tasks"),
     (ContradictionError, "put the blue block in the drawer, careful, mind all the blocks", "'blue block' is the"),

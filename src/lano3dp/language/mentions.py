@@ -281,6 +281,16 @@ def object_mentions(
         if last_end == i - 1 and predicate_noun(words, i):
             i = _noun_run(words, i + 1, known, verbs)  # "that vase was a wedding present": the vase again
             continue
+        if word == "left" and i and (singular(words[i - 1]) in PEOPLE or words[i - 1] in _SUBJECT_PRONOUNS):
+            # "the kids left dominoes everywhere": what someone did, no side; what they left is named after it
+            j = i + 1 + (words[i + 1 : i + 2] != [] and words[i + 1] in _DETERMINERS)
+            end = _noun_run(words, j, known, verbs)
+            found = _mention(words, i + 1, j, end, known, permitted) if end > j else None
+            if found is not None:
+                mentions.append(found)
+                last_end = end
+            i = max(end, i + 1)
+            continue
         if word in _DETERMINERS or word in _MODIFIERS or possessive(words, i):
             j = i
             while j < n and (words[j] in _DETERMINERS or words[j] in _MODIFIERS or possessive(words, j)):
@@ -320,7 +330,9 @@ def object_mentions(
                 _known_at(words, k, known) for k in range(i, run_end)
             ):  # a known word in it is read where it stands ("there are sharp knives")
                 length = run_end - i  # "there are paintbrushes", "there are playing cards": objects, known or not
-        ambiguous = word in _AMBIGUOUS_BARE and not _bare_plural_noun(words, i) and not _bare_noun_said(words, i)
+        ambiguous = word in _AMBIGUOUS_BARE and not _bare_plural_noun(words, i) and not _bare_noun_said(words, i) and (
+            i + 1 >= len(words) or not (_plural_noun(words[i + 1]) and words[i + 1] not in _BOUNDARY)
+        )  # "remote controls", "tape measures": the first word of a compound before its plural head
         if length and not ambiguous and word not in NOT_OBJECTS and not (word in verbs and previous in _CLAUSE_START):
             end = _noun_run(words, i, known, verbs)
             found = _mention(words, i, i, end, known, permitted)
@@ -564,6 +576,7 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
     return end
 
 
+_SUBJECT_PRONOUNS = frozenset("i you he she we they someone somebody".split())
 _AFTER_STAND_VERB = [[w] for w in "up upright it them back the a this that".split()]  # "stand it upright"
 _OWNED_BY = frozenset({("belongs", "to"), ("belong", "to"), ("belonged", "to"), ("belonging", "to")})
 # People, as the subject of what they did ("my roommate knocked it over"); a person said to be near is avoided.

@@ -339,6 +339,7 @@ class _Noun:
     destination: bool = False  # after "into" / "onto": where the carried object goes
     source: bool = False  # after "from", "out of", "off": where something is taken from
     compound: str | None = None  # nouns typed before a known one that name its kind: "mixing" in "mixing bowl"
+    permitted: bool = False  # the user lets it be touched ("the stapler can be moved"): a target only as a last resort
 
     def ref(self, name: str | None = None) -> ObjectRef:
         """The object as said (its compound too: "cat toy"), or named `name`."""
@@ -540,6 +541,8 @@ class OfflineDecomposer:
                 noun.landmark = True  # "past the mug and the jar": both are landmarks
             if not noun.declared and _in_existential_list(task, noun.index, verb_positions):
                 noun.declared = True  # "there's dolls, teddy bears and toy cars": all of them said to be there
+            # "the stapler can be moved, put the eraser in ...": an object the user lets be touched fills a slot last
+            noun.permitted = any(m.permitted and noun.index <= m.index < max(noun.end, noun.index + 1) for m in mentions)
             previous_noun = noun
         parse.obstacles = list(dict.fromkeys(parse.obstacles))
         return parse
@@ -626,6 +629,8 @@ class OfflineDecomposer:
             if subject_end == i and subject_at == start and not coordinated:
                 continue  # no modal and no "that": "the drawer be opened" is no request
             modals = out[subject_end:i]
+            if {"can", "could", "may", "might"} & set(modals) and not {"please", "to"} & set(modals):
+                continue  # "the stapler can be moved": what is allowed, not a request (was: the stapler put away)
             negated = "not" in modals or "never" in modals
             out[start : j + 1] = [*(["don't"] if negated else []), sorted(task_verbs)[0], *out[subject_at:subject_end],
                                   *(state[1:] if state else ())]
@@ -684,6 +689,9 @@ class OfflineDecomposer:
             j = i + 1
             while j < len(words) and words[j] in _NEGATION_FILLER:
                 j += 1
+            aside = next((k for k in range(j + 1, min(len(words), j + 7)) if words[k] == ","), None)
+            if j < len(words) and words[j] == "," and aside is not None:
+                j = aside + 1  # "do not, under any circumstances, stand the bottle up": an aside after the "not"
             if j >= len(words):
                 continue
             if _WANTING & set(words[i + 1 : j]) and not self._is_task_verb(words[j]):
@@ -1487,7 +1495,7 @@ class OfflineDecomposer:
         assigned, free = self._assign(skill, parse.nouns)
         slots = f"{skill.name} ({', '.join(skill.slot_words)})"
         for noun in free:
-            if noun.known and noun.in_task and not (noun.landmark or noun.declared) and not self._same_object(
+            if noun.known and noun.in_task and not (noun.landmark or noun.declared or noun.permitted) and not self._same_object(
                 skill, noun, assigned
             ):  # an object said to be there is avoided (`mentions`), not refused: "there's a bowl by the drawer"
                 raise InstructionNotUnderstoodError(instruction, f"'{noun.name}' has no place in {slots}")
@@ -1544,7 +1552,7 @@ class OfflineDecomposer:
         assigned: dict[int, tuple[_Noun, bool]] = {}
         # "there are two bowls. pour the red one ...", "if there are two drawers, open the top drawer": what is
         # said to be there fills a slot last
-        free = sorted(nouns, key=lambda n: (not n.in_task, n.declared))
+        free = sorted(nouns, key=lambda n: (n.permitted, not n.in_task, n.declared))
         for k, slot in enumerate(skill.slots):
             # A landmark ("past the block", "next to the drawer") fills a slot only when nothing else can: for the
             # item slot, any other noun said as the object can ("move the teapot past the block").
@@ -1861,8 +1869,11 @@ def _check_outcome(instruction: str, skill: SkillSpec, tokens: Sequence[str], fi
             filled[k_].end == i or tokens[i - 1] in ("back", "down")) for k_, slot in enumerate(skill.slots))
         # "put the block on the plate": a place said right after the carried object that is no slot of the skill
         # is where the user wants it, so the skill's own destination (the drawer) would be the wrong place
+        # nothing is put "on" or "onto" a drawer: there any noun is another place ("slide the mobile onto the stand")
+        on_not_in = word in ("on", "onto") and all(skill.slots[d].word == "drawer" for d in destinations)
         other_place = after_carried and k < len(tokens) and tokens[k].isalpha() and tokens[k] not in NOT_OBJECTS and (
             word_classes(tokens[k]) == {"NOUN"} or singular(tokens[k]) in OBJECT_NOUNS  # not "the stand"
+            or on_not_in and "NOUN" in word_classes(tokens[k])
         ) and not any(slot.matches(singular(tokens[k])) for slot in skill.slots)
         other_place = other_place and not {"its", "their"} & set(tokens[i + 1 : k])  # "on its stand": its own base
         if k < len(tokens) and (tokens[k] in _SURFACES or other_place):

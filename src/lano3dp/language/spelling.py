@@ -59,7 +59,7 @@ _PUT_PARTICLES = frozenset({"in", "into", "inside", "on", "onto", "back"})
 EVERYDAY_VERBS: dict[str, tuple[str, frozenset[str]]] = {
     **{
         word: ("put", _PUT_PARTICLES)
-        for word in "pop stick chuck toss throw plonk plop bung stuff lay load hide get tidy relocate park deposit stow"
+        for word in "pop stick chuck toss throw plonk plop bung stuff lay load hide get tidy relocate park deposit stow sit"
         .split()
     },
     "give": ("water", frozenset({"drink", "water"})),  # "give the plant a drink"

@@ -70,6 +70,10 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_17.json", 155, 42, 155),  # first run 141/155 (score_blind.py), 145/155 (convention)
     ("instructions_blind_18.json", 155, 42, 154),  # first run 145/155 (score_blind.py), 150/155 (convention)
     ("instructions_blind_19.json", 156, 43, 155),  # first run 145/156 (score_blind.py), 149/156 (convention)
+    ("instructions_blind_20.json", 178, 51, 176),  # first run 139/178 (score_blind.py), 146/178 (convention)
+    ("instructions_blind_21.json", 173, 48, 172),  # first run 141/173 (score_blind.py), 144/173 (convention)
+    ("instructions_blind_22.json", 174, 48, 171),  # first run 162/174 (score_blind.py), 165/174 (convention)
+    ("instructions_blind_23.json", 168, 52, 150),  # first run 129/168 (score_blind.py), 133/168 (convention)
 ])  # fmt: skip
 def test_later_blind_tables_keep_their_rates_and_stay_safe(table, rows, refusals, exact):
     score = score_table(DATA / table, OfflineDecomposer())

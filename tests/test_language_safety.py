@@ -344,6 +344,12 @@ DECLARED = [
     ("open the drawer, there are tape measures and rulers around it", ("open_drawer", ["drawer"],
                                                                        ["tape measure", "ruler"])),
     ("sit the phone on the dock", ("phone_on_base", ["phone", "base"], [])),
+    # colours listed after a kind name one object each; permissions said after the object, unless negated
+    ("There are three mugs: red, green and blue. Put the green one in the drawer.",
+     ("put_item_in_drawer", ["green mug", "drawer"], ["red mug", "blue mug"])),
+    ("open the drawer, the jar can be nudged and the lamp you may touch", ("open_drawer", ["drawer"], [])),
+    ("open the drawer, none of the cups can be moved", ("open_drawer", ["drawer"], ["cup"])),
+    ("close the microwave, the toaster is in front, be careful", ("close_microwave", ["microwave"], ["toaster"])),
 ]  # fmt: skip
 
 
@@ -430,6 +436,7 @@ REFUSALS = [
     (ContradictionError, "put the phone on the base, phones no touching", "'phone' is the object phone_on_base"),
     (NegatedCommandError, "do not, whatever happens, open the drawer", "asks the robot not to do something"),
     (InstructionNotUnderstoodError, "slide the block onto the stool", "'onto the stool' is not where put_item_in_drawer"),
+    (InstructionNotUnderstoodError, "the green tub, pour it into the pan", "'pour it' means the green tub, which"),
     (UnknownVerbError, "recork the bottle", "'recork' is not a verb any skill is asked for with (skills"),  # no "decork"
     (SeveralTasksError, "ensure the drawer is open and the microwave is shut", "it asks for two tasks"),
     (ContradictionError, "put the blue block in the drawer, careful, mind all the blocks", "'blue block' is the"),

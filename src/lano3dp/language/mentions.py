@@ -100,8 +100,11 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
 # Said after an object, permitting contact with it ("the mug can be moved", "the mug may be touched").
 _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
     ("don't", "matter"), ("dont", "matter"), ("do", "not", "matter"),
-    ("can", "be", "touched"), ("can", "be", "moved"), ("can", "be", "pushed"), ("may", "be", "touched"),
-    ("may", "be", "moved"), ("may", "be", "pushed"), ("doesn't", "matter"), ("does", "not", "matter"),
+    *((modal, "be", done) for modal in ("can", "may") for done in ("touched", "moved", "pushed", "nudged", "bumped",
+                                                                   "knocked", "brushed", "shifted", "hit")),
+    # "the lamp you may touch", "the shoes you can push aside": the object said first
+    *(("you", modal, verb) for modal in ("can", "may") for verb in ("touch", "move", "push", "bump", "nudge")),
+    ("doesn't", "matter"), ("does", "not", "matter"),
     ("is", "fine"), ("is", "ok"), ("is", "okay"), ("is", "alright"), ("is", "allowed"), ("are", "fine"),
     ("is", "no", "problem"), ("'s", "no", "problem"), ("'s", "fine"), ("'s", "ok"), ("'s", "okay"),
     ("if", "you", "have", "to"),
@@ -217,9 +220,12 @@ def permitted_spans(words: Sequence[str]) -> set[int]:
                 k = i - 1 - (words[i - 1 : i] == [":"])  # "towel: contact ok"
                 if words[k : k + 1] in (["that"], ["this"], ["it"]) and words[k - 1 : k] == [","]:
                     k -= 2  # "if you have to nudge the board, that's fine": the clause before it
+                subject = []
                 while k >= 0 and (words[k] not in _CLAUSE_END or _joins_subjects(words, k)):
-                    permitted.add(k)
+                    subject.append(k)
                     k -= 1
+                if not {"none", "neither", "nothing", "nobody"} & {words[m] for m in subject}:
+                    permitted.update(subject)  # not "none of them can be knocked": no permission
         if words[i] in _ALLOWED_WORDS and (i + 1 == len(words) or words[i + 1] in _CLAUSE_END):
             k = i - 1  # "touching the box OK.": a clause about contact that ends in a permission
             while k >= 0 and words[k] not in _CLAUSE_END:

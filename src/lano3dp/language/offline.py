@@ -439,6 +439,7 @@ class OfflineDecomposer:
         self._check_fit(instruction, skill, parse)
         self._resolve_references(instruction, skill, parse)
         targets, target_nouns = self._fill_slots(skill, parse.nouns)
+        _check_pronoun_object(instruction, skill, parse, target_nouns)
         _check_outcome(instruction, skill, parse.tokens, target_nouns)
         # the word each target was named with, where it is one of its slot's words (not "the stapler")
         typed = {k: noun.name for k, noun in target_nouns.items() if _exact(skill.slots[k], noun.name)}
@@ -501,7 +502,7 @@ class OfflineDecomposer:
         words = _front_positions(_declared_placements(_contact_cues(words)))
         words, shorthand = self._shorthand_placements(words, vocabulary)
         read_as += shorthand
-        words = _appositives(words)
+        words = _appositives(_colour_lists(words))
         words = self._resolve_one_anaphora(words, vocabulary)  # first: "leave the green one" names a green bowl
         unresolved = next((i for i, w in enumerate(words) if w in ("one", "ones") and i >= 2 and words[i - 1] in (
             COLOURS | SIZE_WORDS.keys()) and words[i - 2] in DETERMINERS), None)
@@ -1883,6 +1884,25 @@ def _check_outcome(instruction: str, skill: SkillSpec, tokens: Sequence[str], fi
                              f"{', '.join(skill.slots[d].word for d in destinations)}); no skill fits")
 
 
+def _check_pronoun_object(instruction: str, skill: SkillSpec, parse: Parse, filled: Mapping[int, _Noun]) -> None:
+    """ "the blue container, pour it in the pan": "it" is the object named before, which no slot of the skill
+    took; the slot's own word ("bowl") would stand for it, so any bowl would be poured. Refused, naming it."""
+    if len(filled) == len(skill.slots):
+        return
+    obstacles = set(parse.obstacles)
+    for position, verb in parse.verb_at:
+        pronoun = parse.tokens[position + 1] if position + 1 < len(parse.tokens) else ""
+        if pronoun not in ("it", "them"):
+            continue
+        objects = {m.index for m in parse.mentions}  # not "I spilled some flour, can you sweep it ...": dirt
+        named = [n for n in parse.nouns if n.index < position and n not in filled.values() and n.in_task and not (
+            n.landmark or n.declared or n.permitted or n.ref() in obstacles) and objects & set(range(n.index, n.end))]
+        if named:
+            raise InstructionNotUnderstoodError(
+                instruction, f"'{verb.split()[0]} {pronoun}' means the {named[-1].ref().phrase}, which {skill.name} "
+                f"({', '.join(skill.slot_words)}) cannot act on; name the object it is for")
+
+
 def _check_obstacle_count(instruction: str, obstacles: Sequence[ObjectRef]) -> None:
     count = len(set(obstacles))
     if count > MAX_OBSTACLES:
@@ -2124,6 +2144,29 @@ def _after_existential(words: Sequence[str], i: int) -> bool:
     return False
 
 
+def _colour_lists(words: list[str]) -> list[str]:
+    """ "there are four blocks: red, blue, green and yellow" -> "...: the red block, the blue block, ...": each colour
+    listed after a plural kind names one object of it, so the ones not acted on are avoided."""
+    out = list(words)
+    for colon in [k for k, w in enumerate(out) if w == ":"][::-1]:
+        kind = next((k for k in range(colon - 1, max(-1, colon - 5), -1) if singular(out[k]) != out[k] and (
+            singular(out[k]) in OBJECT_NOUNS or "NOUN" in word_classes(singular(out[k])))), None)
+        if kind is None:
+            continue
+        end = colon + 1
+        while end < len(out) and (out[end] in COLOURS or out[end] in (",", "and", "or")):
+            end += 1
+        listed = [w for w in out[colon + 1 : end] if w in COLOURS]
+        if len(listed) < 2 or (end < len(out) and out[end] not in _SENTENCE_END):
+            continue
+        noun = singular(out[kind])
+        expanded: list[str] = []
+        for w in out[colon + 1 : end]:
+            expanded += ["the", w, noun] if w in COLOURS else [w]
+        out[colon + 1 : end] = expanded
+    return out
+
+
 def _appositives(words: list[str]) -> list[str]:
     """ "put the phone on the dock, the black one", "pull the drawer open, the one at the top": "the one" said
     right after a noun phrase tells which it is; its colour, size or side goes before that noun."""
@@ -2340,7 +2383,10 @@ def _front_positions(words: list[str]) -> list[str]:
         post = next((p for p in _POST_POSITIONS if tuple(out[i : i + len(p)]) == p), None)
         previous = out[i - 1]
         after = out[i + len(post)] if post is not None and i + len(post) < len(out) else "."
-        if post is not None and previous in ("is", "sits", "stands", "lies") and after in _CLAUSE_CLOSE:
+        # not "the cutting board is in front": in front of something unsaid (the robot, the target), no side
+        if post is not None and previous in ("is", "sits", "stands", "lies") and after in _CLAUSE_CLOSE and (
+            post != ("in", "front")
+        ):
             # "the laptop is on the left, stay clear of it" -> "the left laptop is, ...": where it stands
             start = i - 2
             while start > 0 and out[start - 1] not in DETERMINERS and out[start - 1] not in _BOUNDARY | _SENTENCE_END:

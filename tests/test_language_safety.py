@@ -435,9 +435,9 @@ REFUSALS = [
     (NegatedCommandError, "you not pour the bowl today", "'not pour the bowl today' asks the robot"),
     (ContradictionError, "put the phone on the base, phones no touching", "'phone' is the object phone_on_base"),
     (NegatedCommandError, "do not, whatever happens, open the drawer", "asks the robot not to do something"),
-    (InstructionNotUnderstoodError, "slide the block onto the stool", "'onto the stool' is not where put_item_in_drawer"),
+    (InstructionNotUnderstoodError, "slide the block onto the stool", "'onto the stool' is not where put_item_in"),
     (InstructionNotUnderstoodError, "the green tub, pour it into the pan", "'pour it' means the green tub, which"),
-    (UnknownVerbError, "recork the bottle", "'recork' is not a verb any skill is asked for with (skills"),  # no "decork"
+    (UnknownVerbError, "recork the bottle", "'recork' is not a verb any skill is asked for with (skills"),  # no decork
     (SeveralTasksError, "ensure the drawer is open and the microwave is shut", "it asks for two tasks"),
     (ContradictionError, "put the blue block in the drawer, careful, mind all the blocks", "'blue block' is the"),
     (ContradictionError, "pour the bowl into the pan, but mind the pan, never touch it", "'never touch it' means pan"),

@@ -542,8 +542,8 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             break  # "the mug can be moved", "the mitt can both be touched": a modal verb
         if word in _HOLDERS and end > j and (words[end + 1 : end + 2] in [*_SENTENCE_ENDS, [","], ["and"],
                                                                             *_BEFORE_A_MODAL]
-                                             or word == "stand" and not _plural_noun(words[end - 1]) and words[
-                                                 end + 1 : end + 2] not in _AFTER_STAND_VERB):
+                                             or word == "stand" and not _plural_noun(words[end - 1]) and (
+                                                 end + 1 == len(words) or words[end + 1] not in AFTER_STAND_VERB)):
             # "the umbrella stand.", "the soldering iron stand on the left": a holder heads the compound, though
             # "stand" is also a verb (not after a plural: "the cups stand on the left")
             end += 1
@@ -583,7 +583,7 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
 
 
 _SUBJECT_PRONOUNS = frozenset("i you he she we they someone somebody".split())
-_AFTER_STAND_VERB = [[w] for w in "up upright it them back the a this that".split()]  # "stand it upright"
+AFTER_STAND_VERB = frozenset("up upright it them back the a this that".split())  # "stand it upright": a verb
 _OWNED_BY = frozenset({("belongs", "to"), ("belong", "to"), ("belonged", "to"), ("belonging", "to")})
 # People, as the subject of what they did ("my roommate knocked it over"); a person said to be near is avoided.
 PEOPLE = frozenset(

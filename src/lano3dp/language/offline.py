@@ -52,6 +52,7 @@ from lano3dp.language.exceptions import (
 )
 from lano3dp.language.grounding import ground_plan
 from lano3dp.language.mentions import (
+    AFTER_STAND_VERB,
     CONTAINERS_OF,
     DESCRIBING,
     MATERIALS,
@@ -155,8 +156,8 @@ _POLITE = frozenset(
 # Hesitations and chat shorthand: no word of the task ("don't hit the lamp lol" names a lamp)
 _FILLERS = frozenset("um umm uh uhm er erm hmm lol lmao rofl thx ty pls plz rn btw tbh idk omg".split())
 _COUNT_MARK = re.compile(r"\b\d+\s?x\b|\bx\s?\d+\b", re.IGNORECASE)
-_CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "thru": "through", "da": "the", "teh": "the", "abt": "about",
-               "tho": "though", "cn": "can", "bc": "because", "cuz": "because", "coz": "because"}
+_CHAT_WORDS = {"n": "and", "u": "you", "ur": "your", "r": "are", "thru": "through", "da": "the", "teh": "the",
+               "abt": "about", "tho": "though", "cn": "can", "bc": "because", "cuz": "because", "coz": "because"}
 _COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands stand lies lie".split())
 _PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
 _WARNINGS = frozenset("careful caution warning attention heads".split())
@@ -543,7 +544,8 @@ class OfflineDecomposer:
             if not noun.declared and _in_existential_list(task, noun.index, verb_positions):
                 noun.declared = True  # "there's dolls, teddy bears and toy cars": all of them said to be there
             # "the stapler can be moved, put the eraser in ...": an object the user lets be touched fills a slot last
-            noun.permitted = any(m.permitted and noun.index <= m.index < max(noun.end, noun.index + 1) for m in mentions)
+            noun.permitted = any(m.permitted and noun.index <= m.index < max(noun.end, noun.index + 1)
+                                 for m in mentions)
             previous_noun = noun
         parse.obstacles = list(dict.fromkeys(parse.obstacles))
         return parse
@@ -998,9 +1000,8 @@ class OfflineDecomposer:
                 start, end = self._subject_before(words, k)
                 if start < end:
                     spans.append((start, end, start, i + 1, " ".join(words[start : i + 1])))
-            elif (words[i] == "alone" or words[i] == "be" and (i + 1 == len(words) or words[i + 1] in _CLAUSE_CLOSE)) and (
-                "leave" in words[max(0, i - 8) : i]
-            ):  # "leave the vase alone", "leave the others be"
+            elif (words[i] == "alone" or words[i] == "be" and (i + 1 == len(words) or words[i + 1] in _CLAUSE_CLOSE)
+                  ) and "leave" in words[max(0, i - 8) : i]:  # "leave the vase alone", "leave the others be"
                 leave = max(k for k in range(max(0, i - 8), i) if words[k] == "leave")
                 spans.append((leave + 1, i, leave, i + 1, " ".join(words[leave : i + 1])))
         return spans
@@ -1146,9 +1147,9 @@ class OfflineDecomposer:
             if word == "stand" and nouns and singular(nouns[-1]) == nouns[-1]:
                 nouns.append(word)  # "the soldering iron stand": a holder after a singular noun
                 continue
-            if nouns and word in _NON_OBJECTS and following.isalpha() and following not in _BOUNDARY | _NON_OBJECTS and (
-                "NOUN" in word_classes(following) or following in OBJECT_NOUNS
-            ) and word in ("table", "counter", "door", "side"):
+            if nouns and word in ("table", "counter", "door", "side") and following.isalpha() and (
+                following not in _BOUNDARY | _NON_OBJECTS
+            ) and ("NOUN" in word_classes(following) or following in OBJECT_NOUNS):
                 nouns.append(word)  # "the coffee table book", "the side door key": inside a compound
                 continue
             if nouns and (word in _STANCE or word in SUBJECT_VERBS or word.endswith("ing") and len(word) > 4):
@@ -1264,7 +1265,7 @@ class OfflineDecomposer:
             if same_participle(word) and (singular(previous) in PEOPLE or previous in _NARRATORS):
                 continue  # "my son put a cup there", "I set it down": what someone did, not a request
             if word == "stand" and after_noun and singular(previous) == previous and following not in (
-                "up", "upright", "it", "them", "back", "the", "a", "this", "that"
+                AFTER_STAND_VERB
             ) and any(w in DETERMINERS for w in task[max(0, i - 4) : i - 1]):
                 continue  # "a soldering iron stand on the left": a holder named after what it holds
             if hits:
@@ -1407,7 +1408,8 @@ class OfflineDecomposer:
         j = i - 1
         while j >= 0 and task[j] in _MODIFIERS:
             if task[j] in POSITION_WORDS:
-                opens = (not j or task[j - 1] in _SENTENCE_END or task[j - 1] == ",") and task[j] not in ("left", "right")
+                opens = (not j or task[j - 1] in _SENTENCE_END or task[j - 1] == ",") and task[j] not in (
+                    "left", "right")
                 if j and (task[j - 1] in DETERMINERS or task[j - 1] in _MODIFIERS) or opens:
                     # "the top drawer", "bottom drawer is jammed"; not "right the bottle", "left it open"
                     position = position or POSITION_WORDS[task[j]]
@@ -1496,7 +1498,9 @@ class OfflineDecomposer:
         assigned, free = self._assign(skill, parse.nouns)
         slots = f"{skill.name} ({', '.join(skill.slot_words)})"
         for noun in free:
-            if noun.known and noun.in_task and not (noun.landmark or noun.declared or noun.permitted) and not self._same_object(
+            if noun.known and noun.in_task and not (
+                noun.landmark or noun.declared or noun.permitted
+            ) and not self._same_object(
                 skill, noun, assigned
             ):  # an object said to be there is avoided (`mentions`), not refused: "there's a bowl by the drawer"
                 raise InstructionNotUnderstoodError(instruction, f"'{noun.name}' has no place in {slots}")
@@ -2026,9 +2030,9 @@ def _colour_phrases(words: list[str]) -> list[str]:
     bottles" -> "the red bottle and the blue bottles": a colour whose noun is said only with the next one."""
     out = list(words)
     for i in range(len(out) - 5, -1, -1):
-        if out[i] in ("the", "a") and out[i + 1] in COLOURS and out[i + 2] in ("and", "or") and out[i + 3] == "the" and (
-            out[i + 4] in COLOURS and out[i + 5].isalpha() and out[i + 5] not in _BOUNDARY | _MODIFIERS
-        ):
+        if out[i] in ("the", "a") and out[i + 1] in COLOURS and out[i + 2] in ("and", "or") and (
+            out[i + 3] == "the" and out[i + 4] in COLOURS and out[i + 5].isalpha()
+        ) and out[i + 5] not in _BOUNDARY | _MODIFIERS:
             out[i + 2 : i + 2] = [singular(out[i + 5])]
     i = 1
     while i + 2 < len(out):

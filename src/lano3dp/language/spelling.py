@@ -59,8 +59,8 @@ _PUT_PARTICLES = frozenset({"in", "into", "inside", "on", "onto", "back"})
 EVERYDAY_VERBS: dict[str, tuple[str, frozenset[str]]] = {
     **{
         word: ("put", _PUT_PARTICLES)
-        for word in "pop stick chuck toss throw plonk plop bung stuff lay load hide get tidy relocate park deposit stow sit"
-        .split()
+        for word in """pop stick chuck toss throw plonk plop bung stuff lay load hide get tidy relocate park deposit
+        stow sit""".split()
     },
     "give": ("water", frozenset({"drink", "water"})),  # "give the plant a drink"
     "hydrate": ("water", frozenset()),  # no particle needed: the verb alone says it

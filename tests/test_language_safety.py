@@ -350,6 +350,13 @@ DECLARED = [
     ("open the drawer, the jar can be nudged and the lamp you may touch", ("open_drawer", ["drawer"], [])),
     ("open the drawer, none of the cups can be moved", ("open_drawer", ["drawer"], ["cup"])),
     ("close the microwave, the toaster is in front, be careful", ("close_microwave", ["microwave"], ["toaster"])),
+    # found by the blind table 24's first run (and one older fault found while fixing it: "mind the hot water
+    # bottle" avoided nothing): a list said to stand around the target, a property before a name
+    ("the cacti and the seed trays are all around the fern, water the fern", ("water_plants", ["watering can",
+                                                                                "plant"], ["cactus", "seed tray"])),
+    ("open the drawer, mind the hot water bottle and the sharp knives", ("open_drawer", ["drawer"],
+                                                                          ["water bottle", "knife"])),
+    ("thanks for the help earlier, now close the microwave", ("close_microwave", ["microwave"], [])),
 ]  # fmt: skip
 
 

@@ -50,7 +50,7 @@ NOT_OBJECTS = frozenset(
     year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact itself
     themselves vicinity surroundings none dear kitchen room house home lab office fortune favour favor look try
     go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space
-    step other others rest""".split()
+    step other others rest help""".split()
 ) - {"obstacle?"}
 # Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.
 UNITS = frozenset(
@@ -406,6 +406,8 @@ MATERIALS = frozenset(
     velvet linen wicker bamboo copper brass aluminium aluminum enamel suede satin nylon denim terracotta pewter
     bronze stainless glass foam cast iron""".split()
 )  # "glass", "iron" name things alone ("the glass"); before a noun they say what it is made of
+# What is said of an object to ask for care ("the glass is fragile"); before a noun no part of its name.
+PROPERTY_WORDS = frozenset("fragile delicate breakable hot sharp precious valuable wobbly unstable expensive".split())
 _PRONOUNS_BEFORE_IS = frozenset(
     "that it there here what who he she this where which whatever whoever something anything everything nothing"
     .split()
@@ -566,8 +568,10 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             and word not in _BOUNDARY
             and word not in _DETERMINERS
             and word not in _MODIFIERS
-            and (word not in verbs or end == j or words[end + 1 : end + 2] in _BEFORE_A_MODAL + _SENTENCE_ENDS)
-            # a verb's word heads a compound before "is" or a full stop: "the chess set is", "the umbrella stand."
+            and (word not in verbs or end == j or words[end + 1 : end + 2] in _BEFORE_A_MODAL + _SENTENCE_ENDS
+                 or bool(_known_at(words, end + 1, known)))
+            # a verb's word heads a compound before "is" or a full stop: "the chess set is", "the umbrella stand.";
+            # before a known noun it names its kind: "the hot water bottle"
             and not word.endswith("ly")
             and not (end > j and (word.endswith("ing") or word.endswith("ed") and past_verb_form(word)
                                   or word in SUBJECT_VERBS))  # "the mug used ...", not "the dog bed"
@@ -692,6 +696,7 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
         chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends or chunk[0] in UNITS
         or is_adjective(chunk[0]) and (chunk[0] not in OBJECT_NOUNS or chunk[0] in MATERIALS)
+        or chunk[0] in PROPERTY_WORDS  # "the sharp knives", though "sharp" is a noun too
     ):  # not "the paper shredder": a thing's name before a noun names its kind
         chunk.pop(0)  # "the open drawer", "the glass beaker", "the 2 litre jug": the object is the noun
     # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)

@@ -58,6 +58,7 @@ from lano3dp.language.mentions import (
     MATERIALS,
     NOT_OBJECTS,
     PEOPLE,
+    PROPERTY_WORDS,
     SUBJECT_VERBS,
     UNITS,
     Mention,
@@ -192,7 +193,6 @@ _CARE_WORDS = frozenset(
     hot breakable sharp precious valuable wobbly unstable expensive careful caution gently mind""".split()
 )
 # Properties that declare the object they are said of an obstacle ("the glass is fragile").
-_PROPERTY_WORDS = frozenset("fragile delicate breakable hot sharp precious valuable wobbly unstable expensive".split())
 _DEGREE = frozenset("very quite really extremely super so too rather a bit".split())
 # What may stand between a clause break and its verb ("and then carefully pour").
 _CLAUSE_OPENERS = frozenset(
@@ -407,7 +407,7 @@ class OfflineDecomposer:
         self._known_words = (
             DETERMINERS | POSITION_WORDS.keys() | _MODIFIERS | _BOUNDARY | _NON_OBJECTS | _COLLISION_VERBS
             | _PARTICLES | _POLITE | _COPULAS | _WARNINGS | _STANCE | _LOCATIVES | _GENERIC_VERBS | _OBSTACLE_NOUNS
-            | _PREDICATE_FILLER | _PROPERTY_WORDS | _CARE_WORDS | OBJECT_NOUNS | _NEGATORS
+            | _PREDICATE_FILLER | PROPERTY_WORDS | _CARE_WORDS | OBJECT_NOUNS | _NEGATORS
             | {w for cue in (*_CUES, *_WAY_MARKERS) for w in cue} | {w for v in self._verbs for w in v.split()}
             | {w for entry in self._vocabulary for w in entry.split()}
         )  # fmt: skip
@@ -541,8 +541,10 @@ class OfflineDecomposer:
             noun.declared = existential or (noun.end < len(task) and task[noun.end] in _COPULAS)
             if k >= 0 and task[k] in ("and", "or") and previous_noun is not None and previous_noun.landmark:
                 noun.landmark = True  # "past the mug and the jar": both are landmarks
-            if not noun.declared and _in_existential_list(task, noun.index, verb_positions):
-                noun.declared = True  # "there's dolls, teddy bears and toy cars": all of them said to be there
+            if not noun.declared and (_in_existential_list(task, noun.index, verb_positions) or _in_subject_list(
+                task, noun.end, verb_positions
+            )):  # "there's dolls, teddy bears and toy cars", "the cacti and the trays are ...": said to be there
+                noun.declared = True
             # "the stapler can be moved, put the eraser in ...": an object the user lets be touched fills a slot last
             noun.permitted = any(m.permitted and noun.index <= m.index < max(noun.end, noun.index + 1)
                                  for m in mentions)
@@ -872,6 +874,9 @@ class OfflineDecomposer:
             cue = next((c for c in _CUES if self._cue_at(words, i, c)), None)
             if cue is not None and cue[0] == "mind" and i and words[i - 1] in ("don't", "dont", "not"):
                 cue = None  # "I don't mind if you brush the boxes": a permission (`mentions`), not a caution
+            adverbs = 1 + (i > 1 and words[i - 1] in ("all", "just", "right", "scattered", "everywhere"))
+            if cue == ("around",) and i and adverbs == 2 and words[i - 2] in _COPULAS:
+                cue = None  # "the cacti and the trays are all around the fern": where they are, not a caution
             if cue == ("around",) and i and (words[i - 1] in _COPULAS or words[i - 1] in _STANCE or (
                 words[i - 1].endswith("ed") and words[i - 1] not in ("steered", "navigated", "moved", "worked")
             )):
@@ -992,7 +997,7 @@ class OfflineDecomposer:
                     and not any(self._is_verb(words, m) for m in range(i + 2, k))
                 ):
                     spans.append((i + 2, k, i + 2, k, " ".join(words[i:k])))
-            elif words[i] in _PROPERTY_WORDS and self._said_of(words, i):
+            elif words[i] in PROPERTY_WORDS and self._said_of(words, i):
                 # "the glass is fragile", "the kettle is very hot": the object it is said of is an obstacle
                 k = i
                 while k > 0 and words[k - 1] in _DEGREE:
@@ -1187,6 +1192,10 @@ class OfflineDecomposer:
                 continue  # "especially the vase", "particularly the lamp": an adverb before the phrase
             if word in UNITS and not nouns:
                 continue  # "the 2 litre jug": a measure (its number was no word) before the noun
+            if not nouns and (word in PROPERTY_WORDS or word in DESCRIBING and word not in _MODIFIERS and (
+                "NOUN" not in word_classes(word)  # not "the rubber duck", "the paper towel"
+            )) and following.isalpha() and following not in _BOUNDARY:
+                continue  # "the hot water bottle": how it is, before its name ("water" then starts the name)
             if word in POSITION_WORDS and not nouns and (word != "middle" or after_determiner):
                 position = POSITION_WORDS[word]
             elif word in COLOURS:
@@ -2105,6 +2114,19 @@ def _in_existential_list(words: Sequence[str], i: int, verb_positions: set[int])
         if words[k] not in _LIST_SEPARATORS and words[k] in _BOUNDARY and words[k] not in DETERMINERS:
             return False  # "there's a mug by the drawer, open it": a landmark or a new clause
         k -= 1
+    return False
+
+
+def _in_subject_list(words: Sequence[str], end: int, verb_positions: set[int]) -> bool:
+    """Whether the noun ending at `end` heads or is in a list that is the subject of a copula ("the cacti, the seed
+    trays and three flowerpots are all around the fern"): said to be somewhere, not acted on."""
+    k = end
+    while k < len(words) and k - end < 12 and k not in verb_positions:
+        if words[k] in _COPULAS:
+            return k > end and any(w in _LIST_SEPARATORS for w in words[end:k])  # a list; one noun is read above
+        if words[k] in _SENTENCE_END or words[k] in _BOUNDARY and words[k] not in DETERMINERS | _LIST_SEPARATORS:
+            return False
+        k += 1
     return False
 
 

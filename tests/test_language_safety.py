@@ -357,6 +357,9 @@ DECLARED = [
     ("open the drawer, mind the hot water bottle and the sharp knives", ("open_drawer", ["drawer"],
                                                                           ["water bottle", "knife"])),
     ("thanks for the help earlier, now close the microwave", ("close_microwave", ["microwave"], [])),
+    # what the user is looking for is in the drawer or elsewhere, not on the table to be avoided
+    ("could you open the drawer? I need to find my passport", ("open_drawer", ["drawer"], [])),
+    ("open the drawer please, I'm looking for my keys", ("open_drawer", ["drawer"], [])),
 ]  # fmt: skip
 
 

@@ -310,6 +310,10 @@ def object_mentions(
                 found = None  # "I spilled some flour, can you sweep it up": what was spilled is dirt, no object
             if found is not None and i and words[i - 1] in ("during", "throughout", "since"):
                 found = None  # "it fell over during the last run": an event, no object
+            if found is not None and words[i] in ("my", "our") and (
+                i >= 1 and words[i - 1] in ("find", "finding") or tuple(words[i - 2 : i]) in _LOOKING_FOR
+            ):
+                found = None  # "I need to find my passport", "I'm looking for my keys": not there to be avoided
             if found is not None and _person_who_did(found, words, end):
                 found = None  # "my son made a mess": who did something earlier is no object on the table
             if found is not None and not _possessor(words, j, end, known, verbs):
@@ -586,6 +590,7 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
     return end
 
 
+_LOOKING_FOR = frozenset((verb, "for") for verb in "look looking search searching".split())
 _SUBJECT_PRONOUNS = frozenset("i you he she we they someone somebody".split())
 AFTER_STAND_VERB = frozenset("up upright it them back the a this that".split())  # "stand it upright": a verb
 _OWNED_BY = frozenset({("belongs", "to"), ("belong", "to"), ("belonged", "to"), ("belonging", "to")})

@@ -360,6 +360,13 @@ DECLARED = [
     # what the user is looking for is in the drawer or elsewhere, not on the table to be avoided
     ("could you open the drawer? I need to find my passport", ("open_drawer", ["drawer"], [])),
     ("open the drawer please, I'm looking for my keys", ("open_drawer", ["drawer"], [])),
+    # found by the blind table 25's first run: an adjective ending in -ly ended the name before it began ("a
+    # wobbly lamp" was no object at all), a side said before "some water", counts as words, "go ahead and nudge"
+    ("close the microwave. there's a wobbly lamp on top of it", ("close_microwave", ["microwave"], ["lamp"])),
+    ("give the fern on the left some water", ("water_plants", ["watering can", "left plant"], [])),
+    ("open the drawer and avoid the dominoes, all twelve of them", ("open_drawer", ["drawer"], ["domino"])),
+    ("open the drawer, go ahead and nudge the sponge", ("open_drawer", ["drawer"], [])),
+    ("open the drawer, the teapot was my aunt's and it's fragile", ("open_drawer", ["drawer"], ["teapot"])),
 ]  # fmt: skip
 
 

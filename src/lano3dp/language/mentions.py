@@ -58,7 +58,12 @@ UNITS = frozenset(
     inches foot feet litre litres liter liters ml millilitre millilitres milliliter milliliters gallon gallons
     pint pints oz ounce ounces kg kilo kilos gram grams""".split()
 )
-NOT_OBJECTS = NOT_OBJECTS | UNITS
+# Numbers said as words: counts, never objects ("the chess pieces, all sixteen of them").
+NUMBER_WORDS = frozenset(
+    """two three four five six seven eight nine ten eleven twelve thirteen fourteen fifteen sixteen seventeen eighteen
+    nineteen twenty thirty forty fifty hundred dozen""".split()
+)
+NOT_OBJECTS = NOT_OBJECTS | UNITS | NUMBER_WORDS
 # Words that end a noun phrase.
 _BOUNDARY = frozenset(
     """in into on onto over under from to with without of at by near next beside behind inside out up down off
@@ -96,6 +101,8 @@ _PERMISSIONS: tuple[tuple[str, ...], ...] = (
     ("don't", "care", "if"), ("dont", "care", "if"), ("do", "not", "care", "if"), ("don't", "care", "about"),
     ("dont", "care", "about"), ("not", "bothered", "if"), ("not", "bothered", "about"), ("not", "fussed", "if"),
     ("not", "fussed", "about"),
+    # "go ahead and nudge the dishcloth"
+    *(("go", "ahead", "and", verb) for verb in ("nudge", "bump", "touch", "move", "push", "knock", "brush")),
 )  # fmt: skip
 # Said after an object, permitting contact with it ("the mug can be moved", "the mug may be touched").
 _PERMITTED_AFTER: tuple[tuple[str, ...], ...] = (
@@ -576,7 +583,7 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
                  or bool(_known_at(words, end + 1, known)))
             # a verb's word heads a compound before "is" or a full stop: "the chess set is", "the umbrella stand.";
             # before a known noun it names its kind: "the hot water bottle"
-            and not word.endswith("ly")
+            and not (word.endswith("ly") and "ADJ" not in word_classes(word))  # not "wobbly", "curly": adjectives
             and not (end > j and (word.endswith("ing") or word.endswith("ed") and past_verb_form(word)
                                   or word in SUBJECT_VERBS))  # "the mug used ...", not "the dog bed"
             and not (end > j and word in _PLURAL_SUBJECT_VERBS and singular(words[end - 1]) != words[end - 1])
@@ -699,7 +706,7 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
             break  # "the pan lid": a lid comes off, so it is an object of its own
         chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
     while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
-        chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends or chunk[0] in UNITS
+        chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends or chunk[0] in UNITS | NUMBER_WORDS
         or is_adjective(chunk[0]) and (chunk[0] not in OBJECT_NOUNS or chunk[0] in MATERIALS)
         or chunk[0] in PROPERTY_WORDS  # "the sharp knives", though "sharp" is a noun too
     ):  # not "the paper shredder": a thing's name before a noun names its kind

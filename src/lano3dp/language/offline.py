@@ -57,6 +57,7 @@ from lano3dp.language.mentions import (
     DESCRIBING,
     MATERIALS,
     NOT_OBJECTS,
+    NUMBER_WORDS,
     PEOPLE,
     PROPERTY_WORDS,
     SUBJECT_VERBS,
@@ -1102,7 +1103,7 @@ class OfflineDecomposer:
     def _read_chunk(self, chunk: list[str], index: int, cue: str, parse: Parse) -> None:
         if chunk and chunk[0] in _QUANTIFIED and "of" in chunk[1:4]:
             rest = chunk[1 : chunk.index("of", 1)]
-            if all(w in ("one", "single", "last", "single one") for w in rest):
+            if all(w in ("one", "single", "last", "single one") or w in NUMBER_WORDS for w in rest):
                 chunk = chunk[chunk.index("of", 1) + 1 :]  # "any of them", "every one of them", "all of the cups"
         content = tuple(w for w in chunk if w not in _POLITE or w in ("it", "one"))
         bare = tuple(w for w in content if w not in ("very", "just", "also", "either", "any"))
@@ -1190,8 +1191,8 @@ class OfflineDecomposer:
                 continue  # "the neighbouring vase" is a vase
             if not nouns and not after_determiner and len(word) > 5 and word.endswith("ly"):
                 continue  # "especially the vase", "particularly the lamp": an adverb before the phrase
-            if word in UNITS and not nouns:
-                continue  # "the 2 litre jug": a measure (its number was no word) before the noun
+            if (word in UNITS or word in NUMBER_WORDS) and not nouns:
+                continue  # "the 2 litre jug", "the dozen eggs": a measure or a count before the noun
             if not nouns and (word in PROPERTY_WORDS or word in DESCRIBING and word not in _MODIFIERS and (
                 "NOUN" not in word_classes(word)  # not "the rubber duck", "the paper towel"
             )) and following.isalpha() and following not in _BOUNDARY:
@@ -1638,7 +1639,7 @@ class OfflineDecomposer:
             # "the vase was my grandmother's, so be careful with it": the owner is no object to avoid
             before = [n for n in before if not (
                 not n.known and parse.tokens[n.end : n.end + 1] == ["'s"] and possessive(parse.tokens, n.end)
-                and parse.tokens[n.end + 1 : n.end + 2] in ([], *([w] for w in _SENTENCE_END), [","]))]
+                and parse.tokens[n.end + 1 : n.end + 2] in ([], *([w] for w in _SENTENCE_END), [","], ["and"]))]
             before = [n for n in before if not predicate_noun(parse.tokens, n.index - 1)]  # "... was a gift"
             # "my glasses are on the table, don't break them", "it got water yesterday, don't get it wet", "it
             # belongs to my neighbour", "my kids left a ball ...": no object a pronoun means
@@ -2428,7 +2429,8 @@ def _front_positions(words: list[str]) -> list[str]:
             i += 1  # "on top of the drawer", "in front of it": a place relative to another object
             continue
         following = out[i + len(post)] if i + len(post) < len(out) else ","
-        if following.isalpha() and following not in _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS and (
+        not_said_of = _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS | DETERMINERS  # "... some water"
+        if following.isalpha() and following not in not_said_of and (
             following not in _STATES_AFTER and "NOUN" in word_classes(following)
             and not (following.endswith("s") and "VERB" in word_classes(following)) and not past_verb_form(following)
         ):  # not "the pan on the left stays untouched", "the lamp at the back wobbles", "... upright"

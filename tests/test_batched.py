@@ -85,8 +85,6 @@ def test_the_batcher_samples_once_every_episode_waits_each_with_its_own_noise_an
 
 
 LEXICON_LOADS = """
-import subprocess
-import sys
 import threading
 from lemminflect.codecs.InflectionLUCodec import InflectionLUCodec
 from lemminflect.codecs.LemmaLUCodec import LemmaLUCodec

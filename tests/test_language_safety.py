@@ -367,6 +367,14 @@ DECLARED = [
     ("open the drawer and avoid the dominoes, all twelve of them", ("open_drawer", ["drawer"], ["domino"])),
     ("open the drawer, go ahead and nudge the sponge", ("open_drawer", ["drawer"], [])),
     ("open the drawer, the teapot was my aunt's and it's fragile", ("open_drawer", ["drawer"], ["teapot"])),
+    # found by the blind table 26's first run: the object before "beside it", a swept substance is never what
+    # "them" means, "half done", "are all around it"
+    ("close the microwave, the test tubes beside it are fragile", ("close_microwave", ["microwave"], ["test tube"])),
+    ("sweep the sand into the dustpan, the lamp and the vases are right there, don't knock them",
+     ("sweep_to_dustpan", ["broom", "dustpan"], ["lamp", "vase"])),
+    ("there's a lego castle half built next to the drawer, open the drawer", ("open_drawer", ["drawer"],
+                                                                               ["lego castle"])),
+    ("stand the bottle upright, the toy cars are all around it", ("bottle_upright", ["bottle"], ["toy car"])),
 ]  # fmt: skip
 
 
@@ -448,6 +456,7 @@ REFUSALS = [
     (InstructionNotUnderstoodError, "put the green one in the drawer", "'the green one' refers to no object named"),
     (InstructionNotUnderstoodError, "put the dog in the drawer", "'dog' is a person or an animal; put_item_in_drawer"),
     (UnknownVerbError, "I put the block in the drawer", "no task is asked for: 'put' here says what happened"),
+    (ContradictionError, "open the wine bottle but do not touch a single bottle", "'bottle' is the object"),
     (NegatedCommandError, "please no open the drawer", "'no open the drawer' asks the robot not to do something"),
     (NegatedCommandError, "you not pour the bowl today", "'not pour the bowl today' asks the robot"),
     (ContradictionError, "put the phone on the base, phones no touching", "'phone' is the object phone_on_base"),

@@ -563,6 +563,10 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             continue
         if end > j and (singular(words[end - 1]) in PEOPLE and word.endswith("s") and "VERB" in word_classes(word)):
             break  # "before my mum visits": a person's verb, not a "mum visit"
+        if word in ("half", "partly", "almost") and end > j and words[end + 1 : end + 2] and (
+            past_verb_form(words[end + 1]) or words[end + 1] in ("done", "full", "empty", "open", "built")
+        ):
+            break  # "a jigsaw puzzle half done": how far along it is, no part of its name
         if word == "old" and end > j and words[end - 1] in ("year", "years", "month", "months"):
             return end + 1  # "my 2 year old keeps grabbing it": a child (its number was no word), no object
         if end > j and _verb_with_object(words, end):

@@ -210,6 +210,7 @@ _STATE_WORDS = frozenset("open shut closed upright".split())
 _PERMITTING = frozenset(
     (w, "to") for w in "allowed permitted ok okay fine alright free".split()
 )  # "it is allowed to move the box": before a contact verb, a permission
+_NEAR_WORDS = frozenset("to of front top in on adjacent right just".split())  # "right next to it", "on top of it"
 _NARRATORS = frozenset("i he she they we someone somebody".split())  # subjects of what was done, never "you"
 # A state asked for with "ensure ... is": the skill's verb that makes it ("ensure the bottle is upright").
 _ENSURED_STATES = {"open": ("open",), "shut": ("shut",), "upright": ("stand", "upright")}
@@ -977,6 +978,12 @@ class OfflineDecomposer:
                     spans.append((start, end, start, stop, " ".join(words[start:stop])))
             elif words[i] in _OBSTACLE_NOUNS and self._obstacle_predicate(words, i):
                 spans.append(self._obstacle_predicate(words, i))
+            elif words[i] == "around" and i >= 2 and (words[i - 1] in _COPULAS or words[i - 1] in (
+                "all", "just", "right") and words[i - 2] in _COPULAS):
+                # "the toy sheep are all around it": they stand around it, so they are in the way
+                start, end = self._subject_before(words, i - (words[i - 1] not in _COPULAS))
+                if start < end:
+                    spans.append((start, end, start, i, " ".join(words[start : i + 1])))
             elif words[i] == "between":
                 # "there is a mug between the bowl and the pan", "the mug sits between them": on the path
                 start, end = self._subject_before(words, i)
@@ -1075,6 +1082,19 @@ class OfflineDecomposer:
             plural = True  # "there are a mug and a glass in the way"
         while start < end and words[start] in _LIST_SEPARATORS:
             start += 1
+        if end - start == 1 and words[start] in ("it", "them") and start >= 3 and words[start - 1] in (
+            _LOCATIVES | {"to", "of"}
+        ):  # "the petri dishes beside it are fragile": the dishes, beside the object said before
+            k = start - 1
+            while k > 0 and words[k] in _LOCATIVES | _NEAR_WORDS:
+                k -= 1
+            first = k
+            while first > 0 and words[first] not in DETERMINERS and words[first - 1] not in _SUBJECT_STOPS and (
+                not self._is_verb(words, first - 1)
+            ):
+                first -= 1
+            if first < k and words[first] in DETERMINERS:
+                start, end = first, k + 1
         if start >= 2 and words[start - 1] == "'s" and end > start and words[end - 1] in NOT_OBJECTS:
             owner = start - 1  # "the kettle's handle is hot": the kettle is the object, its handle a part of it
             while owner > 0 and words[owner - 1] not in _SUBJECT_STOPS and not self._is_verb(words, owner - 1):
@@ -1165,8 +1185,8 @@ class OfflineDecomposer:
                 continue
             if nouns and word.isalpha() and word_classes(word) == {"ADV"}:
                 break  # "mind the lamp though": an adverb ends the noun phrase
-            if nouns and word in _STATES_AFTER:
-                break  # "don't get the books wet": a state said of the object after it
+            if nouns and (word in _STATES_AFTER or word in ("half", "partly", "almost")):
+                break  # "don't get the books wet", "the jigsaw puzzle half done": a state said of the object
             if nouns and word.endswith("ed") and word_classes(word) and "NOUN" not in word_classes(word):
                 break  # "the wine glasses lined up behind it": a participle after the noun
             if word == "'s" and nouns and " ".join(nouns) not in OBJECT_NOUNS and possessive(chunk, k) and (
@@ -1183,8 +1203,8 @@ class OfflineDecomposer:
                 if nouns:
                     break  # "the teacup its my favourite": a second determiner starts another phrase
                 continue
-            if word == "single" and not nouns and chunk[k - 1 : k] and chunk[k - 1] in ("every", "each", "any"):
-                continue  # "every single bottle" is every bottle
+            if word == "single" and not nouns and chunk[k - 1 : k] and chunk[k - 1] in ("every", "each", "any", "a"):
+                continue  # "every single bottle" is every bottle, "don't touch a single bottle" none of them
             if word in _PERSONAL_PRONOUNS or word.isdigit():
                 break  # "I want that you put ...": "that" is a conjunction, "you" no object; "the abacus 12 cm ..."
             if not nouns and word in _RELATIONAL_ADJECTIVES:
@@ -1641,6 +1661,8 @@ class OfflineDecomposer:
                 not n.known and parse.tokens[n.end : n.end + 1] == ["'s"] and possessive(parse.tokens, n.end)
                 and parse.tokens[n.end + 1 : n.end + 2] in ([], *([w] for w in _SENTENCE_END), [","], ["and"]))]
             before = [n for n in before if not predicate_noun(parse.tokens, n.index - 1)]  # "... was a gift"
+            # "sweep the sand into the dustpan, ... don't knock them": what is swept is dirt, never meant
+            before = [n for n in before if not _swept(parse.tokens, n.index)]
             # "my glasses are on the table, don't break them", "it got water yesterday, don't get it wet", "it
             # belongs to my neighbour", "my kids left a ball ...": no object a pronoun means
             before = [n for n in before if n.name not in _SURFACES and n.name not in NOT_OBJECTS
@@ -2116,6 +2138,14 @@ def _in_existential_list(words: Sequence[str], i: int, verb_positions: set[int])
             return False  # "there's a mug by the drawer, open it": a landmark or a new clause
         k -= 1
     return False
+
+
+def _swept(words: Sequence[str], i: int) -> bool:
+    """The noun at `i` is what a sweep verb acts on ("sweep the sand into ..."): dirt, no object."""
+    k = i - 1
+    while k >= 0 and (words[k] in DETERMINERS or words[k] in _MODIFIERS):
+        k -= 1
+    return k >= 0 and bool(lemmas(words[k]) & {"sweep", "brush"})
 
 
 def _in_subject_list(words: Sequence[str], end: int, verb_positions: set[int]) -> bool:

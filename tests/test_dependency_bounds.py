@@ -9,7 +9,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def requirement(text: str) -> tuple[str, str, str]:
-    """'zarr>=3.0.8' -> ('zarr', '>=', '3.0.8'): the name and its first bound (a marker or comment ignored)."""
+    """'zarr>=3.1.3' -> ('zarr', '>=', '3.1.3'): the name and its first bound (a marker or comment ignored)."""
     match = re.match(r"\s*([A-Za-z0-9_.\-]+)\s*(==|>=)?\s*([0-9][0-9A-Za-z.]*)?", text)
     return match.group(1).lower().replace("_", "-"), match.group(2) or "", match.group(3) or ""
 

@@ -457,6 +457,8 @@ REFUSALS = [
     (InstructionNotUnderstoodError, "put the dog in the drawer", "'dog' is a person or an animal; put_item_in_drawer"),
     (UnknownVerbError, "I put the block in the drawer", "no task is asked for: 'put' here says what happened"),
     (ContradictionError, "open the wine bottle but do not touch a single bottle", "'bottle' is the object"),
+    (ContradictionError, "pour the bowl into the pan, mind the pan", "'pan' is the object bowl_pour acts on, and "
+                                                                      "'mind' says to keep away from it"),
     (NegatedCommandError, "please no open the drawer", "'no open the drawer' asks the robot not to do something"),
     (NegatedCommandError, "you not pour the bowl today", "'not pour the bowl today' asks the robot"),
     (ContradictionError, "put the phone on the base, phones no touching", "'phone' is the object phone_on_base"),

@@ -189,6 +189,7 @@ _NEGATING_BEFORE = {"no": "need", "off": "hold"}  # "no need to ...", "hold off 
 _DESTINATIONS = frozenset("in into inside onto on".split())
 # Cue words that ask for care with an object rather than distance from it: said of a target they are no
 # contradiction ("pour the bowl, don't spill it"); "avoid" or "don't touch" said of a target is one.
+_PARTS = frozenset("handle rim edge spout lid neck knob cap side corner top bottom".split())  # of the object said
 _CARE_WORDS = frozenset(
     """spill drop break damage scratch smash crack dent tip topple upset knock tilt shake crush fragile delicate
     hot breakable sharp precious valuable wobbly unstable expensive careful caution gently mind""".split()
@@ -1785,7 +1786,10 @@ class OfflineDecomposer:
             # care for every object of the target's kind ("mind all the blocks") is care for the target too
             every = any(ref == obstacle and parse.tokens[k : k + 1] in (["all"], ["every"], ["each"], ["any"])
                         for k, ref in parse.declared)
-            if not _is_care(cue) or every:
+            # "mind the pan" keeps away from it as "mind the mug" does; "mind the pan's handle" asks for care
+            part = any(ref == obstacle and _PARTS & set(parse.tokens[k : k + 6]) for k, ref in parse.declared)
+            minded = cue.split()[:1] == ["mind"] and not part
+            if not _is_care(cue) or every or minded:
                 raise ContradictionError(
                     instruction,
                     f"'{same[0].phrase}' is the object {skill.name} acts on, and '{cue or 'avoid'}' says to keep "

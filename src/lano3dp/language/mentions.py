@@ -284,7 +284,7 @@ def object_mentions(
         if word == "that" and (i == last_end or _relative_verb(words, i + 1)):
             i += 1  # "the bottle that fell", "a vase on the right of it that wobbles"
             continue
-        if word in _SWEEP_VERBS and (words[i - 1] if i else ",") in _CLAUSE_START:
+        if word in SWEEP_VERBS and (words[i - 1] if i else ",") in _CLAUSE_START:
             i = _after_swept(words, i + 1, known, verbs)  # "sweep the sand ...": what is swept is no object
             continue
         if tuple(words[i - 2 : i]) in _OWNED_BY:
@@ -502,7 +502,7 @@ _WHERE_AFTER_BARE = frozenset(
 )
 
 
-_SWEEP_VERBS = frozenset("sweep brush".split())
+SWEEP_VERBS = frozenset("sweep brush".split())
 
 
 def _after_swept(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
@@ -561,7 +561,7 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             # "stand" is also a verb (not after a plural: "the cups stand on the left")
             end += 1
             continue
-        if end > j and (singular(words[end - 1]) in PEOPLE and word.endswith("s") and "VERB" in word_classes(word)):
+        if end > j and singular(words[end - 1]) in PEOPLE and _third_person_verb(word):
             break  # "before my mum visits": a person's verb, not a "mum visit"
         if word in ("half", "partly", "almost") and end > j and words[end + 1 : end + 2] and (
             past_verb_form(words[end + 1]) or words[end + 1] in ("done", "full", "empty", "open", "built")
@@ -632,9 +632,7 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
         return True  # "my parents are coming over for dinner": not here now
     if following[:1] in (["has"], ["had"], ["have"]):
         following = following[1:]
-    if following and following[0].endswith("s") and following[0] not in _BOUNDARY and "VERB" in word_classes(
-        following[0]
-    ):
+    if following and following[0] not in _BOUNDARY and _third_person_verb(following[0]):
         return True  # "before my mum visits", "my son leaves it lying around": a person doing something
     if len(following) == 2 and following[1] in ("you", "it", "them", "me", "us") and following[0].isalpha() and (
         "VERB" in word_classes(following[0])
@@ -657,11 +655,16 @@ _PLURAL_SUBJECT_VERBS = frozenset(
 )
 
 
+def _third_person_verb(word: str) -> bool:
+    """ "wobbles", "visits", "blocks": a word that can be a verb said of one subject."""
+    return word.endswith("s") and "VERB" in word_classes(word)
+
+
 def _relative_verb(words: Sequence[str], i: int) -> bool:
     """words[i] is the verb of a relative clause with no object ("... that wobbles.", "that tips over")."""
     word = words[i] if i < len(words) else ""
     following = words[i + 1] if i + 1 < len(words) else "."
-    return word.endswith("s") and "VERB" in word_classes(word) and (
+    return _third_person_verb(word) and (
         following in _CLAUSE_END or following in _PARTICLES_AFTER_VERBS or following.endswith("ly"))
 
 
@@ -669,7 +672,7 @@ def _verb_with_object(words: Sequence[str], i: int) -> bool:
     """words[i] is a verb of the third person with its object or particle after it ("blocks the way", "knocks
     it", "sticks out")."""
     word = words[i]
-    return word.endswith("s") and "VERB" in word_classes(word) and words[i + 1 : i + 2] != [] and (
+    return _third_person_verb(word) and words[i + 1 : i + 2] != [] and (
         words[i + 1] in _ARTICLES or words[i + 1] in ("it", "them", "its", "these", "those", "out", "up")
     )  # not "pieces all over"
 

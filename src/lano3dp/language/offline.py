@@ -61,6 +61,7 @@ from lano3dp.language.mentions import (
     PEOPLE,
     PROPERTY_WORDS,
     SUBJECT_VERBS,
+    SWEEP_VERBS,
     UNITS,
     Mention,
     enforce_mentions,
@@ -697,9 +698,8 @@ class OfflineDecomposer:
             j = i + 1
             while j < len(words) and words[j] in _NEGATION_FILLER:
                 j += 1
-            aside = next((k for k in range(j + 1, min(len(words), j + 7)) if words[k] == ","), None)
-            if j < len(words) and words[j] == "," and aside is not None:
-                j = aside + 1  # "do not, under any circumstances, stand the bottle up": an aside after the "not"
+            if j < len(words) and words[j] == ",":  # "do not, under any circumstances, stand the bottle up"
+                j = next((k + 1 for k in range(j + 1, min(len(words), j + 7)) if words[k] == ","), j)
             if j >= len(words):
                 continue
             if _WANTING & set(words[i + 1 : j]) and not self._is_task_verb(words[j]):
@@ -877,18 +877,8 @@ class OfflineDecomposer:
             cue = next((c for c in _CUES if self._cue_at(words, i, c)), None)
             if cue is not None and cue[0] == "mind" and i and words[i - 1] in ("don't", "dont", "not"):
                 cue = None  # "I don't mind if you brush the boxes": a permission (`mentions`), not a caution
-            adverbs = 1 + (i > 1 and words[i - 1] in ("all", "just", "right", "scattered", "everywhere"))
-            if cue == ("around",) and i and adverbs == 2 and words[i - 2] in _COPULAS:
-                cue = None  # "the cacti and the trays are all around the fern": where they are, not a caution
-            if cue == ("around",) and i and (words[i - 1] in _COPULAS or words[i - 1] in _STANCE or (
-                words[i - 1].endswith("ed") and words[i - 1] not in ("steered", "navigated", "moved", "worked")
-            )):
-                cue = None  # "three monitors are crowded around the microwave": where they are, not a caution
-            before = words[i - 1] if i else ","
-            noun_before = singular(before) in OBJECT_NOUNS or singular(before) != before and "NOUN" in word_classes(
-                singular(before)) or word_classes(before) == {"NOUN"}
-            if cue == ("around",) and noun_before and _after_existential(words, i):
-                cue = None  # "there are five jars and two mugs around the bowl": where they are
+            if cue == ("around",) and _around_says_where(words, i):
+                cue = None
             if cue is None:
                 i += 1
                 continue
@@ -1930,11 +1920,11 @@ def _check_pronoun_object(instruction: str, skill: SkillSpec, parse: Parse, fill
     if len(filled) == len(skill.slots):
         return
     obstacles = set(parse.obstacles)
+    objects = {m.index for m in parse.mentions}  # not "I spilled some flour, can you sweep it ...": dirt
     for position, verb in parse.verb_at:
         pronoun = parse.tokens[position + 1] if position + 1 < len(parse.tokens) else ""
         if pronoun not in ("it", "them"):
             continue
-        objects = {m.index for m in parse.mentions}  # not "I spilled some flour, can you sweep it ...": dirt
         named = [n for n in parse.nouns if n.index < position and n not in filled.values() and n.in_task and not (
             n.landmark or n.declared or n.permitted or n.ref() in obstacles) and objects & set(range(n.index, n.end))]
         if named:
@@ -2149,7 +2139,7 @@ def _swept(words: Sequence[str], i: int) -> bool:
     k = i - 1
     while k >= 0 and (words[k] in DETERMINERS or words[k] in _MODIFIERS):
         k -= 1
-    return k >= 0 and bool(lemmas(words[k]) & {"sweep", "brush"})
+    return k >= 0 and bool(lemmas(words[k]) & SWEEP_VERBS)
 
 
 def _in_subject_list(words: Sequence[str], end: int, verb_positions: set[int]) -> bool:
@@ -2191,6 +2181,21 @@ def _quantities(words: list[str]) -> list[str]:
             continue
         out.append(word)
     return out
+
+
+def _around_says_where(words: Sequence[str], i: int) -> bool:
+    """ "around" at `i` says where things stand, not to go around them: "three monitors are crowded around the
+    microwave", "the cacti and the trays are all around the fern", "there are two mugs around the bowl"."""
+    before = words[i - 1] if i else ","
+    if before in _COPULAS or before in _STANCE or (
+        before.endswith("ed") and before not in ("steered", "navigated", "moved", "worked")
+    ):
+        return True
+    if i > 1 and before in ("all", "just", "right", "scattered", "everywhere") and words[i - 2] in _COPULAS:
+        return True
+    noun_before = singular(before) in OBJECT_NOUNS or singular(before) != before and "NOUN" in word_classes(
+        singular(before)) or word_classes(before) == {"NOUN"}
+    return noun_before and _after_existential(words, i)
 
 
 def _after_existential(words: Sequence[str], i: int) -> bool:
@@ -2435,6 +2440,10 @@ def _own_body(words: list[str]) -> list[str]:
     return out
 
 
+# After a side said behind a noun, words that are not the next noun it could be said of ("... on the right some water")
+_NOT_SAID_OF = _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS | DETERMINERS
+
+
 def _front_positions(words: list[str]) -> list[str]:
     """ "the bowl on the left" -> "the left bowl", "the mug closest to you" -> "the nearest mug": a position
     said after the noun moves in front of it, where colours and sizes are read."""
@@ -2463,8 +2472,7 @@ def _front_positions(words: list[str]) -> list[str]:
             i += 1  # "on top of the drawer", "in front of it": a place relative to another object
             continue
         following = out[i + len(post)] if i + len(post) < len(out) else ","
-        not_said_of = _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS | DETERMINERS  # "... some water"
-        if following.isalpha() and following not in not_said_of and (
+        if following.isalpha() and following not in _NOT_SAID_OF and (
             following not in _STATES_AFTER and "NOUN" in word_classes(following)
             and not (following.endswith("s") and "VERB" in word_classes(following)) and not past_verb_form(following)
         ):  # not "the pan on the left stays untouched", "the lamp at the back wobbles", "... upright"

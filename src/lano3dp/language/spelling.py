@@ -81,6 +81,11 @@ _TRIGGER_CLAUSE_END = frozenset(". ; : ! ? , and then but while".split())
 _REVERSING_PREFIXES = frozenset({"re", "un", "de"})
 
 
+def _reverses(word: str, other: str) -> bool:
+    """ "recork" / "decork": the two differ by a prefix that reverses the verb, so one is no typo of the other."""
+    return word[2:] == other[2:] and bool({word[:2], other[:2]} & _REVERSING_PREFIXES)
+
+
 class Correction(NamedTuple):
     index: int
     said: str
@@ -117,8 +122,8 @@ def correct_word(word: str, choices: Sequence[str], substitution_from: int = 6) 
     if len(close) != 1:
         return None
     ((choice, _),) = close
-    if word[2:] == choice[2:] and {word[:2], choice[:2]} & _REVERSING_PREFIXES:
-        return None  # "recork" is no typo of "decork": a prefix that reverses the verb is another verb
+    if _reverses(word, choice):
+        return None
     if len(word) == 3 and len(choice) < 4 and not _swap_of(word, choice):
         return None
     return choice
@@ -200,6 +205,6 @@ def everyday_verbs(words: Sequence[str], lexicon: Iterable[str]) -> tuple[list[s
 def suggest(word: str, choices: Sequence[str], cutoff: float = 70.0) -> str | None:
     """The closest of `choices` to an unknown `word` for a refusal's "did you mean", or None."""
     found = process.extractOne(word, choices, score_cutoff=cutoff)
-    if found and word[2:] == found[0][2:] and {word[:2], found[0][:2]} & _REVERSING_PREFIXES:
+    if found and _reverses(word, found[0]):
         return None  # never "recork: did you mean decork?"
     return found[0] if found else None

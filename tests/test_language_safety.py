@@ -469,6 +469,10 @@ REFUSALS = [
     (SeveralTasksError, "ensure the drawer is open and the microwave is shut", "it asks for two tasks"),
     (ContradictionError, "put the blue block in the drawer, careful, mind all the blocks", "'blue block' is the"),
     (ContradictionError, "pour the bowl into the pan, but mind the pan, never touch it", "'never touch it' means pan"),
+    # "careful" asks for care, but what follows "not" is what not to do: touching the phone it places (table 28)
+    (ContradictionError, "put the phone on the charger, careful not to touch the phone", "'careful not to touch' says"),
+    (UnknownVerbError, "i want the vase in the drawer to stay", "it has no verb that asks for a task"),
+    (UnknownVerbError, "i don't want the phone on the charger", "no skill fits"),
     (NegatedCommandError, "Please don't move the block into the drawer", "'don't move the block into the drawer'"),
     (SeveralTasksError, "Open the drawer and put the block in it",
      "it asks for two tasks ('open': open_drawer, open_wine_bottle; 'put in': bottle_in_drawer, put_item_in_drawer)"),
@@ -682,6 +686,29 @@ NOT_REFUSED = [
      ("put_item_in_drawer", ["sponge", "drawer"], ["stapler"])),
     # what a thing is made of is no part of its name, as "the wooden drawer" is a drawer
     ("Gently put the plastic frog in the drawer past the mug", ("put_item_in_drawer", ["frog", "drawer"], ["mug"])),
+    # found by the blind table 28: care said after "not" with a verb of care is still care; a permission for a
+    # compound ("the mouse pad") keeps the object its inner noun names elsewhere ("the mice"); "on its feet" is
+    # upright, not "put ... back" into a drawer; "the paint can on the right" is a can, and what "might tip" is an
+    # obstacle, a slot word too ("the bowl" beside a drawer task)
+    ("pour the bowl into the pan, careful not to knock the pan", ("bowl_pour", ["bowl", "pan"], [])),
+    ("put the marker in the drawer. bumping the mouse pad is fine but don't touch the mice",
+     ("put_item_in_drawer", ["marker", "drawer"], ["mouse"])),
+    ("put the marker in the drawer. avoid the mouse pad, bumping the mouse pad is fine",
+     ("put_item_in_drawer", ["marker", "drawer"], [])),
+    ("get the bottle back on its feet", ("bottle_upright", ["bottle"], [])),
+    ("sweep the sawdust into the dustpan, the wobbly green paint can on the right might tip",
+     ("sweep_to_dustpan", ["broom", "dustpan"], ["right green paint can"])),
+    ("the can on the left might fall, open the drawer", ("open_drawer", ["drawer"], ["left can"])),
+    ("put the block in the drawer, the bowl could tip", ("put_item_in_drawer", ["block", "drawer"], ["bowl"])),
+    ("the bowl wobbles, put the block in the drawer", ("put_item_in_drawer", ["block", "drawer"], ["bowl"])),
+    ("put the bottle upright, it might roll off", ("bottle_upright", ["bottle"], [])),  # care for the target
+    # what "could spill" is what may happen, no second task; a wish for a placement asks for it, when the place
+    # ends the clause (not "i want the vase in the drawer to stay")
+    ("stand up the bottle on the right, the one on the left is full of glitter and could spill",
+     ("bottle_upright", ["right bottle"], ["left bottle"])),
+    ("i want the phone on the charger pls, dont knock the picture frame",
+     ("phone_on_base", ["phone", "base"], ["picture frame"])),
+    ("i want the block in the top drawer", ("put_item_in_drawer", ["block", "top drawer"], [])),
 ]
 
 

@@ -144,6 +144,8 @@ class Mention:
         color / size / position: attribute words said in front of it, canonical.
         index: token index of its head.
         permitted: the instruction explicitly permits contact with it.
+        compound: the whole name said, where a known noun inside it was taken as the object ("mouse pad" named
+            "mouse"); empty otherwise.
     """
 
     name: str
@@ -152,6 +154,7 @@ class Mention:
     position: str | None = None
     index: int = 0
     permitted: bool = False
+    compound: str = ""
 
     @property
     def head(self) -> str:
@@ -551,7 +554,7 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
     while end < len(words):
         word = words[end]
         more = _known_at(words, end, known)
-        if word == "can" and _modal_can(words, end):
+        if word == "can" and modal_can(words, end):
             break  # "the mug can be moved", "the mitt can both be touched": a modal verb
         if word in _HOLDERS and end > j and (words[end + 1 : end + 2] in [*_SENTENCE_ENDS, [","], ["and"],
                                                                             *_BEFORE_A_MODAL]
@@ -677,9 +680,14 @@ def _verb_with_object(words: Sequence[str], i: int) -> bool:
     )  # not "pieces all over"
 
 
-def _modal_can(words: Sequence[str], i: int) -> bool:
+_PLACE_PREPOSITIONS = frozenset("on in at by near beside behind under over next above below".split())
+
+
+def modal_can(words: Sequence[str], i: int) -> bool:
     """ "can" at `i` is the modal verb ("the mug can be moved", "can both be touched"), not "the tin can"."""
     following = words[i + 1] if i + 1 < len(words) else "."
+    if following in _PLACE_PREPOSITIONS:
+        return False  # "the paint can on the right", "the can by the sink": where the can stands
     if following in ("be", "you", "i", "we", "not", "now", "both", "all", "also", "still", "safely", "easily", "stay",
                      "go", "move", "get", "remain", "fall", "break", "tip", "stand", "sit", "touch"):
         return True
@@ -748,7 +756,10 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
     chunk[-1] = singular(chunk[-1])
     if len(" ".join(chunk)) > MAX_NAME_CHARS:
         return None  # no object's name is that long; a plan could not carry it either
-    return Mention(" ".join(chunk), color, size, position, j + len(chunk) - 1, bool(set(range(j, end)) & permitted))
+    typed = [*words[j : end - 1], singular(words[end - 1])]
+    compound = " ".join(typed[-3:]) if typed[-1] != chunk[-1] else ""
+    return Mention(" ".join(chunk), color, size, position, j + len(chunk) - 1, bool(set(range(j, end)) & permitted),
+                   compound)
 
 
 _DEGREE_NOUNS = frozenset("bit tad touch".split())
@@ -887,11 +898,20 @@ def enforce_mentions(
     permitted = [m for m in mentions if m.permitted and not is_target(m, plan, skill, registry)]
     kept = []
     for obstacle in obstacles:
-        if any(is_obstacle(m, plan.model_copy(update={"obstacles": [obstacle]})) for m in permitted):
+        if any(_permits(m, obstacle, plan) for m in permitted):
             warnings.append(f"contact with '{obstacle.phrase}' is permitted by the instruction; it is not avoided")
         else:
             kept.append(obstacle)
     return plan.model_copy(update={"obstacles": kept, "warnings": warnings})
+
+
+def _permits(mention: Mention, obstacle: ObjectRef, plan: TaskPlan) -> bool:
+    """A permission lifts the obstacle it names. Said of a compound named by a known noun inside it, only that
+    compound's: "bumping the mouse pad is fine" leaves "don't touch the mice"."""
+    if mention.compound:
+        theirs = obstacle.name.split()
+        return theirs[-1] == mention.compound.split()[-1] and set(theirs) <= set(mention.compound.split())
+    return is_obstacle(mention, plan.model_copy(update={"obstacles": [obstacle]}))
 
 
 def unaccounted(

@@ -36,6 +36,7 @@ are dominated by the object nouns.
 from __future__ import annotations
 
 import functools
+import itertools
 import re
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -66,6 +67,7 @@ from lano3dp.language.mentions import (
     Mention,
     enforce_mentions,
     is_adjective,
+    modal_can,
     named_in_passing,
     names_another,
     object_mentions,
@@ -190,11 +192,16 @@ _NEGATING_BEFORE = {"no": "need", "off": "hold"}  # "no need to ...", "hold off 
 _DESTINATIONS = frozenset("in into inside onto on".split())
 # Cue words that ask for care with an object rather than distance from it: said of a target they are no
 # contradiction ("pour the bowl, don't spill it"); "avoid" or "don't touch" said of a target is one.
+_NEGATIONS = frozenset("not never no without don't dont".split())  # in a cue, before what not to do
 _PARTS = frozenset("handle rim edge spout lid neck knob cap side corner top bottom".split())  # of the object said
 _CARE_WORDS = frozenset(
     """spill drop break damage scratch smash crack dent tip topple upset knock tilt shake crush fragile delicate
-    hot breakable sharp precious valuable wobbly unstable expensive careful caution gently mind""".split()
+    hot breakable sharp precious valuable wobbly unstable expensive careful caution gently mind fall roll wobble
+    tumble shatter""".split()
 )
+# Verbs that say an object may fall ("the bowl might tip"): said of it, it is an obstacle as "fragile" makes it.
+_UNSTEADY_VERBS = frozenset("tip topple fall wobble tumble break shatter crack roll".split())
+_RISK_MODALS = frozenset("might could may can will would".split())
 # Properties that declare the object they are said of an obstacle ("the glass is fragile").
 _DEGREE = frozenset("very quite really extremely super so too rather a bit".split())
 # What may stand between a clause break and its verb ("and then carefully pour").
@@ -495,6 +502,7 @@ class OfflineDecomposer:
         text = re.sub(r"\b(lay|laying|lays|put|putting) a finger on\b", lambda m: "touching" if m.group(1).endswith(
             "ing") else "touch", text, flags=re.IGNORECASE)  # an idiom of touching
         text = re.sub(r"\s*(?:->|=>|-->|→)\s*", " into ", text)  # "block -> drawer": shorthand for "into"
+        text = re.sub(r"\bon (?:its|their) feet\b", "upright", text, flags=re.IGNORECASE)  # "back on its feet"
         tokens = tokenize(text)
         words = [_CHAT_WORDS.get(w, w) for w in _without_disfluencies(tokens)]
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
@@ -565,6 +573,8 @@ class OfflineDecomposer:
             return out, warnings  # a verb somewhere ("Mixing bowl -> frying pan. Pour.") says what to do
         while start < len(out):
             end = next((k for k in range(start, len(out)) if out[k] in _SENTENCE_END), len(out))
+            wish = next((len(w) for w in _WISHES if tuple(out[start : start + len(w)]) == w), 0)
+            start += wish  # "i want the phone on the charger": the wish asks for the placement
             sentence = out[start:end]
             p = next((k for k, w in enumerate(sentence) if w in ("into", "onto", "to", "in", "on")), None)
             if p is not None and 0 < p <= 4:
@@ -577,7 +587,12 @@ class OfflineDecomposer:
                 # an unknown word, a noun alone ("carabiner into drawer"); before "the" it is a verb ("blorp the ...")
                 thing = known_thing or (len(head) == 1 and word_classes(head[0]) <= {"NOUN"})
                 thing = thing and not any(w in DETERMINERS for w in before[1:])
-                if thing and all(w.isalpha() for w in head) and rest and singular(rest[0]) in places:
+                # after a wish the place ends the clause: not "i want the vase in the drawer to stay"
+                after_place = itertools.dropwhile(
+                    lambda w: w in DETERMINERS or w in _MODIFIERS or singular(w) in places, sentence[p + 1 :])
+                settled = not wish or all(w in _POLITE for w in itertools.takewhile(
+                    lambda w: w not in _CLAUSE_CLOSE, after_place))
+                if thing and settled and all(w.isalpha() for w in head) and rest and singular(rest[0]) in places:
                     said = " ".join(sentence)
                     out.insert(start, "put")
                     warnings.append(f"read '{said}' as 'put {said}'")
@@ -996,6 +1011,12 @@ class OfflineDecomposer:
                     and not any(self._is_verb(words, m) for m in range(i + 2, k))
                 ):
                     spans.append((i + 2, k, i + 2, k, " ".join(words[i:k])))
+            elif self._unsteady_at(words, i):
+                # "the bowl might tip", "the vase could fall over", "the lamp wobbles": what may fall is an obstacle
+                k = i - (words[i - 1] in _RISK_MODALS)
+                start, end = self._subject_before(words, k)
+                if start < end and words[start:end] not in (["it"], ["they"], ["this"], ["that"]):  # "it": the mention
+                    spans.append((start, end, start, i + 1, " ".join(words[start : i + 1])))
             elif words[i] in PROPERTY_WORDS and self._said_of(words, i):
                 # "the glass is fragile", "the kettle is very hot": the object it is said of is an obstacle
                 k = i
@@ -1009,6 +1030,18 @@ class OfflineDecomposer:
                 leave = max(k for k in range(max(0, i - 8), i) if words[k] == "leave")
                 spans.append((leave + 1, i, leave, i + 1, " ".join(words[leave : i + 1])))
         return spans
+
+    @staticmethod
+    def _unsteady_at(words: list[str], i: int) -> bool:
+        """words[i] says its subject may fall, used without an object: after a modal ("might tip", "could fall
+        over") or as the subject's own verb ("wobbles", "tips easily"); not "tip the bowl over"."""
+        if i == 0 or not lemmas(words[i]) & _UNSTEADY_VERBS:
+            return False
+        following = words[i + 1] if i + 1 < len(words) else "."
+        intransitive = following in _CLAUSE_CLOSE or following in ("over", "off", "down", "easily", "too", "if")
+        third_person = words[i].endswith("s") and words[i - 1] not in _RISK_MODALS and words[i - 1] not in (
+            DETERMINERS) and words[i - 1].isalpha()
+        return intransitive and (words[i - 1] in _RISK_MODALS or third_person)
 
     @staticmethod
     def _said_of(words: list[str], i: int) -> bool:
@@ -1153,10 +1186,11 @@ class OfflineDecomposer:
         vague = False  # "the thing next to the pan": a head that names no object ends the phrase too
         for k, word in enumerate(chunk):
             after_determiner = previous in DETERMINERS or previous in COLOURS or previous in SIZE_WORDS
+            after_modifier = after_determiner or previous in POSITION_WORDS
             previous = word
             following = chunk[k + 1] if k + 1 < len(chunk) else ","
-            if word == "can" and nouns and following not in ("be", "you", "i", "we", "not", "now"):
-                nouns.append(word)  # "the tin can", "the soda can": a noun after a noun
+            if word == "can" and (nouns or after_modifier) and following not in ("be", "you", "i", "we", "not", "now"):
+                nouns.append(word)  # "the tin can", "the soda can", "the left can": a noun after a noun or a modifier
                 continue
             if word in _COMPOUND_MODIFIERS and not nouns and following not in _BOUNDARY | _NON_OBJECTS | _SENTENCE_END:
                 nouns.append(word)  # "the water bottle", "the table lamp"
@@ -1801,7 +1835,11 @@ def _short_for(said: Mention | ObjectRef, target: ObjectRef) -> bool:
 
 
 def _is_care(cue: str) -> bool:
-    return any(lemmas(word) & _CARE_WORDS for word in cue.split())
+    """After a negation only what is not to be done counts: "careful not to knock" asks for care, "careful not to
+    touch" for distance, as "don't touch" does."""
+    words = cue.split()
+    negation = next((k for k, word in enumerate(words) if word in _NEGATIONS), None)
+    return any(lemmas(word) & _CARE_WORDS for word in words[negation + 1 if negation is not None else 0 :])
 
 
 _QUESTION_WORDS = frozenset("is are was were do does did where what why when who which how has have am".split())
@@ -1965,7 +2003,8 @@ def _may_happen(tokens: Sequence[str], i: int) -> bool:
     """ "the water could spill", "the vase might break": a modal after a noun (its subject) says what may
     happen; "could you ...", "you could ..." ask."""
     return i >= 2 and tokens[i - 1] in _MODALS_AFTER_SUBJECT and tokens[i - 2].isalpha() and (
-        tokens[i - 2] not in _POLITE and "NOUN" in word_classes(tokens[i - 2]))
+        tokens[i - 2] not in _POLITE and "NOUN" in word_classes(tokens[i - 2])
+        or tokens[i - 2] in ("it", "they", "which", "and"))  # "the glass is full and could spill"
 
 
 def _after_wanted_object(tokens: Sequence[str], position: int) -> bool:
@@ -2441,7 +2480,8 @@ def _own_body(words: list[str]) -> list[str]:
 
 
 # After a side said behind a noun, words that are not the next noun it could be said of ("... on the right some water")
-_NOT_SAID_OF = _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS | DETERMINERS
+_WISHES = (("i", "want"), ("i", "'d", "like"), ("i", "would", "like"), ("i", "need"))  # before a wanted placement
+_NOT_SAID_OF = _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS | DETERMINERS | _RISK_MODALS  # "... might tip"
 
 
 def _front_positions(words: list[str]) -> list[str]:
@@ -2465,7 +2505,8 @@ def _front_positions(words: list[str]) -> list[str]:
                 out[start : i + len(post)] = [_POST_POSITIONS[post], *out[start : i - 1], previous]
                 i += len(post)
                 continue
-        if post is None or previous in _BOUNDARY or previous in DETERMINERS or previous in _MODIFIERS:
+        the_can = previous == "can" and not modal_can(out, i - 1)  # "the paint can on the left": a noun
+        if post is None or previous in _BOUNDARY and not the_can or previous in DETERMINERS or previous in _MODIFIERS:
             i += 1
             continue
         if out[i + len(post) : i + len(post) + 1] == ["of"]:

@@ -709,6 +709,17 @@ NOT_REFUSED = [
     ("i want the phone on the charger pls, dont knock the picture frame",
      ("phone_on_base", ["phone", "base"], ["picture frame"])),
     ("i want the block in the top drawer", ("put_item_in_drawer", ["block", "top drawer"], [])),
+    # found by the blind table 29: kinds of plant are watered, not avoided beside a watered "plant"; a room named to
+    # say where is no object; "shove ... into" is "put ... into"
+    ("water the roses with the green watering can, mind the trowel and the flower pots",
+     ("water_plants", ["green watering can", "plant"], ["trowel", "flower pot"])),
+    ("water the ivy", ("water_plants", ["watering can", "plant"], [])),
+    ("water the fern, avoid the rose", ("water_plants", ["watering can", "plant"], ["rose"])),
+    ("in the garage: open the drawer but steer clear of the oil can", ("open_drawer", ["drawer"], ["oil can"])),
+    ("could you shove the green bottle into the drawer", ("bottle_in_drawer", ["green bottle", "drawer"], [])),
+    ("don't shove the vase, open the drawer", ("open_drawer", ["drawer"], ["vase"])),
+    ("please don't disturb the sleeping cat, just shut the microwave", ("close_microwave", ["microwave"], ["cat"])),
+    ("avoid the sleeping bag, open the drawer", ("open_drawer", ["drawer"], ["sleeping bag"])),
 ]
 
 

@@ -50,7 +50,8 @@ NOT_OBJECTS = frozenset(
     year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact itself
     themselves vicinity surroundings none dear kitchen room house home lab office fortune favour favor look try
     go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space
-    step other others rest help""".split()
+    step other others rest help bathroom garage studio workshop classroom nursery bedroom hallway basement attic
+    cellar lounge pantry""".split()  # rooms: "in the garage: open the drawer" names where, no object
 ) - {"obstacle?"}
 # Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.
 UNITS = frozenset(
@@ -649,7 +650,8 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
 _ON_THEIR_WAY = frozenset("coming visiting arriving calling expecting".split())
 _BEFORE_A_MODAL = [[w] for w in "can can't cannot must mustn't should shouldn't is are won't will may".split()]
 _SENTENCE_ENDS = [[], ["."], [";"], ["!"]]
-_ROOMS = frozenset("kitchen bathroom office garden lab house room".split())  # "the kitchen roll" is a roll's kind
+_ROOMS = frozenset("""kitchen bathroom office garden lab house room garage studio workshop classroom nursery bedroom
+    hallway basement attic cellar lounge pantry""".split())  # "the kitchen roll" is a roll's kind
 _SPILLED = frozenset("spilled spilt spill spills dropped".split())
 _HOLDERS = frozenset("stand rack holder tray mat stool basket bed".split())
 # Verbs said right after a plural subject ("the drumsticks need to stay", "the cups look fragile").

@@ -1256,6 +1256,8 @@ class OfflineDecomposer:
             "NOUN" not in word_classes(nouns[0]) or nouns[0] in MATERIALS and " ".join(nouns) not in OBJECT_NOUNS
         ):
             nouns.pop(0)  # "the hot red pan", "the porcelain teapot"; not "the rubber duck", "the remote control"
+        while len(nouns) > 1 and nouns[0].endswith("ing") and singular(nouns[-1]) in PEOPLE:
+            nouns.pop(0)  # "the sleeping cat": what it does; a "sleeping bag" is a kind of bag
         nouns = nouns[-_MAX_COMPOUND:]  # "the a b c d e f": no object's name is a run of words
         if not nouns or len(" ".join(nouns)) > MAX_NAME_CHARS:
             return None

@@ -60,7 +60,7 @@ EVERYDAY_VERBS: dict[str, tuple[str, frozenset[str]]] = {
     **{
         word: ("put", _PUT_PARTICLES)
         for word in """pop stick chuck toss throw plonk plop bung stuff lay load hide get tidy relocate park deposit
-        stow sit""".split()
+        stow sit shove""".split()
     },
     "give": ("water", frozenset({"drink", "water"})),  # "give the plant a drink"
     "hydrate": ("water", frozenset()),  # no particle needed: the verb alone says it

@@ -76,9 +76,12 @@ class WaterPlants(Task):
     stages = ("reached_can", "grasped", "lifted", "over_plant", "tilted", "watered")
     description = "pour water on the plant with the watering can"
     verbs = ("water", "irrigate", "sprinkle", "give water", "pour water")
+    # what people water: kinds of plant by name ("water the roses"); a name missing here is avoided, not watered
     synonyms = {"watering can": ("sprinkler", "watering jug"), "plant": (
         "flower", "houseplant", "potted plant", "fern", "succulent", "cactus", "orchid", "herb", "basil", "bonsai",
-        "seedling", "sapling")}
+        "seedling", "sapling", "rose", "tulip", "daisy", "ivy", "sunflower", "geranium", "begonia", "petunia", "pansy",
+        "marigold", "lavender", "hydrangea", "azalea", "aloe", "aloe vera", "monstera", "pothos", "bamboo", "mint",
+        "rosemary", "thyme", "parsley", "shrub", "bush", "sprout", "vine")}
     carried = "watering can"
 
     def sample_layout(self, rng: np.random.Generator, variation: Variation) -> Layout:

@@ -63,9 +63,10 @@ def test_the_batcher_samples_once_every_episode_waits_each_with_its_own_noise_an
 
     def episode(i: int) -> None:
         window = {"object_clouds": torch.zeros(1, 1, 1, 64, 3), "state": torch.full((1, 1, 11), float(i))}
-        chunks[i] = handles[i].predict_action_chunk(window, generator=generators[i], position_cost=costs[i],
-                                                    guidance="g", scheduler=None, num_inference_steps=None)
-        batcher.leave()
+        with batcher.turn:  # an episode works in its turn and hands it on while it waits for its chunk
+            chunks[i] = handles[i].predict_action_chunk(window, generator=generators[i], position_cost=costs[i],
+                                                        guidance="g", scheduler=None, num_inference_steps=None)
+            batcher.leave()
 
     threads = [threading.Thread(target=episode, args=(i,)) for i in range(3)]
     for thread in threads:

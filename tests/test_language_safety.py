@@ -720,6 +720,12 @@ NOT_REFUSED = [
     ("don't shove the vase, open the drawer", ("open_drawer", ["drawer"], ["vase"])),
     ("please don't disturb the sleeping cat, just shut the microwave", ("close_microwave", ["microwave"], ["cat"])),
     ("avoid the sleeping bag, open the drawer", ("open_drawer", ["drawer"], ["sleeping bag"])),
+    # found by the blind table 30: a size before a tool's noun that is also a verb ("the small brush"), a verb's
+    # word inside a noun after the task's verb ("the spark plug"), "thanks a lot"
+    ("brush the dirt into the dustpan with the small brush", ("sweep_to_dustpan", ["small broom", "dustpan"], [])),
+    ("put the spark plug in the drawer, stay clear of the oil can",
+     ("put_item_in_drawer", ["spark plug", "drawer"], ["oil can"])),
+    ("Could you open the bottom drawer? Thanks a lot!", ("open_drawer", ["bottom drawer"], [])),
 ]
 
 

@@ -50,7 +50,7 @@ NOT_OBJECTS = frozenset(
     year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact itself
     themselves vicinity surroundings none dear kitchen room house home lab office fortune favour favor look try
     go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space
-    step other others rest help bathroom garage studio workshop classroom nursery bedroom hallway basement attic
+    step other others rest help lot bathroom garage studio workshop classroom nursery bedroom hallway basement attic
     cellar lounge pantry""".split()  # rooms: "in the garage: open the drawer" names where, no object
 ) - {"obstacle?"}
 # Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.

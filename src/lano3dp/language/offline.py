@@ -1302,14 +1302,18 @@ class OfflineDecomposer:
                 previous = ","  # "after that open it": "that" is no determiner there
             if previous in ("first", "second", "third", "last", "next") and (i < 2 or task[i - 2] in _TASK_BREAKS):
                 previous = ","  # "first stand the bottle up": an adverb opening the clause, not "the first drawer"
-            if previous in DETERMINERS or previous in COLOURS or previous in POSITION_WORDS or previous in _COPULAS:
-                continue
+            if previous in DETERMINERS | _MODIFIERS or previous in _COPULAS:
+                continue  # "the base", "the small brush": a noun after a determiner or an attribute
+            following = task[i + 1] if i + 1 < len(task) else ","
+            if positions and after_noun and i >= 2 and task[i - 2] in DETERMINERS and "NOUN" in word_classes(word) and (
+                following not in DETERMINERS
+            ):
+                continue  # "put the spark plug in the drawer": after the task's verb, a noun's second word
             k = i - 1
             while k > 0 and (task[k].endswith("ly") or task[k] in _STATE_ADVERBS):
                 k -= 1
             if k < i - 1 and task[k] in _COPULAS:
                 continue  # "it's fully charged", "the drawer is already open": a state, not a request
-            following = task[i + 1] if i + 1 < len(task) else ","
             if word == "close" and (following in ("to", "by", "beside", "behind", "next") or previous in _DEGREE):
                 continue
             if word == "right" and following in _RIGHT_AS_ADVERB_BEFORE:

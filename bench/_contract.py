@@ -36,6 +36,7 @@ from typing import Any
 
 from lano3dp.evaluation.results import results_file
 from lano3dp.jsonio import to_jsonable, write_json, write_text_atomic
+from lano3dp.provenance import source_commit
 
 ROOT = Path(__file__).resolve().parent.parent
 RESULTS = ROOT / "results"
@@ -98,6 +99,7 @@ def parse(parser: argparse.ArgumentParser, argv: Sequence[str] | None = None) ->
     if args.episodes is not None and args.episodes < 1:
         parser.error(f"--episodes must be >= 1, got {args.episodes}")
     args.command = shlex.join(["python", f"bench/{args._script}", *given])
+    source_commit()  # cached now: the code that runs is the checkout at the start, not a commit made meanwhile
     return args
 
 

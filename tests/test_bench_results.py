@@ -66,6 +66,29 @@ def test_the_writer_records_provenance_generates_the_page_from_the_json_and_refr
     assert "| [demo_x.json](demo_x.json) ([page](demo_x.md)) | demo |" in (tmp_path / "INDEX.md").read_text()
 
 
+def test_a_bench_records_the_commit_it_started_at_not_one_made_while_it_ran(tmp_path, monkeypatch):
+    import subprocess
+
+    from lano3dp import provenance
+
+    head = {"commit": "a" * 40}
+
+    def git(command, **kwargs):
+        out = head["commit"] if "rev-parse" in command else ""
+        return subprocess.CompletedProcess(command, 0, stdout=out, stderr="")
+
+    monkeypatch.setattr(provenance.subprocess, "run", git)
+    provenance.source_commit.cache_clear()
+    try:
+        parser = contract.bench_parser("bench/bench_demo.py", "Demo.", tasks="bowl_pour", episodes=1, seed=0)
+        args = contract.parse(parser, ["--out-dir", str(tmp_path)])
+        head["commit"] = "b" * 40  # a commit made while the bench runs
+        record = json.loads(contract.write_results("demo", args, {"rows": []}).read_text())
+    finally:
+        provenance.source_commit.cache_clear()
+    assert record["provenance"]["commit"] == "a" * 40
+
+
 def test_the_seed_is_the_first_seed_and_an_unused_argument_is_refused_with_its_reason(capsys):
     parser = contract.bench_parser("bench/bench_demo.py", "Demo.", tasks=contract.Unused("no simulator task"),
                                    episodes=2, seed=0)

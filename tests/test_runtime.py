@@ -458,6 +458,52 @@ def test_a_target_hidden_after_the_first_frame_keeps_its_previous_cloud(observer
         fresh.policy_input(hidden_pan, state)
 
 
+def test_a_frame_no_window_holds_is_perceived_only_when_a_later_hidden_target_needs_it(observer):
+    env = FakeEnv([BOWL, PAN])
+    obs, _ = env.reset(seed=0)
+    first, state = observe(env, obs)
+    moved = render_boxes(first.camera, [BOWL, Box("pan", (0.26, 0.05), PAN.size, PAN.attributes)])
+    hidden = render_boxes(first.camera, [BOWL])  # the pan is gone from view
+    eager = PolicyRunner(FakePolicy(), observer)
+    for frame in (first, moved):
+        eager.object_clouds(frame)
+    expected = eager.object_clouds(hidden)  # the pan keeps its cloud from the frame before
+
+    asked = []
+
+    def later(frame):
+        return lambda: asked.append(frame) or frame
+
+    deferring = PolicyRunner(FakePolicy(), observer)
+    deferring.object_clouds(first)
+    assert deferring.targets.can_defer(deferring.target_phrases)
+    deferring.targets.defer(later(moved), step=1)
+    np.testing.assert_array_equal(deferring.object_clouds(first), eager.object_clouds(first))
+    assert asked == []  # every target in view: the frame in between is never rendered
+    deferring.targets.defer(later(moved), step=3)
+    np.testing.assert_array_equal(deferring.object_clouds(hidden), expected)
+    assert asked == [moved] and deferring.targets.deferred == []
+
+
+def test_a_step_whose_observation_no_window_holds_takes_the_queued_action_without_it():
+    policy, eager = FakePolicy(n_action_steps=5), FakePolicy(n_action_steps=5)  # two observation steps each
+    states = [np.concatenate([[0.01 * t, 0.0, 0.25], ROT6D, [0.04, 1.0]]).astype(np.float32) for t in range(12)]
+    clouds = np.zeros((1, 2, 64, 3), np.float32)
+    for t, state in enumerate(states):
+        observation = {"object_clouds": clouds + t, "state": state[None]}
+        expected = eager.select_action(observation)
+        if policy.observation_needed():
+            action = policy.select_action(observation)
+        else:
+            action = policy.select_queued_action()
+        torch.testing.assert_close(action, expected)
+    assert len(policy.calls) == len(eager.calls) == 3
+    for ours, theirs in zip(policy.calls, eager.calls, strict=True):  # the windows sampled from are the same
+        torch.testing.assert_close(ours["obs"]["state"], theirs["obs"]["state"])
+    with pytest.raises(RuntimeError, match="reaches a sampled window"):
+        FakePolicy().select_queued_action()
+
+
 def test_the_collector_and_the_runtime_share_one_resize_and_one_observe():
     from lano3dp import collect
     from lano3dp.policy.observations import image

@@ -103,6 +103,30 @@ def test_frame_carries_ground_truth_instances(env):
     assert frame.depth[frame.segmentation >= 0].min() > 0.3  # metres from the camera
 
 
+def test_a_frame_taken_for_later_renders_that_moment_and_only_when_asked(env):
+    env.reset(seed=0)
+    actions = env.expert_plan().actions()
+    env.step(actions[0])
+    later, now = env.frame_later(), env.frame()
+    env.defer_images(True)
+    try:
+        obs = env.step(actions[1])[0]
+        assert set(obs) == {"state"}  # no image rendered for a step nobody looks at
+        env.step(actions[2])
+        then = later()
+    finally:
+        env.defer_images(False)
+    np.testing.assert_array_equal(then.depth, now.depth)
+    np.testing.assert_array_equal(then.segmentation, now.segmentation)
+    np.testing.assert_array_equal(then.camera.cam_to_world, now.camera.cam_to_world)
+    assert then.timestamp == now.timestamp and later() is then
+    assert not np.array_equal(env.frame().depth, now.depth)  # the present is rendered when asked for
+    stale = env.frame_later()
+    env.reset(seed=1)
+    with pytest.raises(RuntimeError, match="earlier episode"):
+        stale()
+
+
 def test_extreme_random_actions_among_obstacles_never_crash():
     environment = TabletopEnv("bowl_pour", variation="obstacle+clutter", image_size=32, render_rgb=False)
     rng = np.random.default_rng(1)

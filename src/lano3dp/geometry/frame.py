@@ -55,10 +55,8 @@ def observe(env, obs: Any) -> tuple[RGBDFrame, np.ndarray]:
     RGBDFrame with ground-truth instances), else it is assembled from the observation's "rgb", "depth",
     "intrinsics" and "cam_to_world" (and "segmentation" when present).
     """
+    state = observed_state(obs)
     if isinstance(obs, Mapping):
-        if "state" not in obs:
-            raise KeyError(f"observation needs a 'state' (11,), got keys {sorted(obs)}")
-        state = obs["state"]
         if "frame" in obs:
             frame = obs["frame"]
         elif callable(getattr(env, "frame", None)):
@@ -71,13 +69,24 @@ def observe(env, obs: Any) -> tuple[RGBDFrame, np.ndarray]:
                               camera=PinholeCamera(width, height, obs["intrinsics"], obs["cam_to_world"]),
                               segmentation=obs.get("segmentation"))
     else:
-        frame, state = obs.frame, obs.state
+        frame = obs.frame
     if not isinstance(frame, RGBDFrame):
         raise TypeError(f"observation 'frame' must be an RGBDFrame, got {type(frame).__name__}")
+    return frame, state
+
+
+def observed_state(obs: Any) -> np.ndarray:
+    """The robot state (11,) float32 of an observation: its "state", or its `state` attribute."""
+    if isinstance(obs, Mapping):
+        if "state" not in obs:
+            raise KeyError(f"observation needs a 'state' (11,), got keys {sorted(obs)}")
+        state = obs["state"]
+    else:
+        state = obs.state
     state = np.asarray(state, dtype=np.float32)
     if state.shape != (11,):
         raise ValueError(f"robot state must be (11,), got {state.shape}")
-    return frame, state
+    return state
 
 
 def resize_rgb(rgb: np.ndarray, size: int) -> np.ndarray:

@@ -221,6 +221,11 @@ class ErrorModelSegmenter:
             mask = _morph(mask, dilate=u_side < 0.5, pixels=model.boundary_px)
         return mask if mask.any() else None
 
+    def per_frame(self, phrases: Sequence[str]) -> bool:
+        """Whether `segment(frame, phrases)` depends on the frame alone: once every phrase is grounded (its first
+        sight drew the episode's confusion), a frame's errors come from that frame's own draws."""
+        return self.model.is_zero or all(phrase in self._groundings for phrase in phrases)
+
     # ---- the Segmenter protocol -----------------------------------------------------------------------
     def segment(self, frame: RGBDFrame, phrases: Sequence[str]) -> list[MaskResult]:
         if self.model.is_zero:

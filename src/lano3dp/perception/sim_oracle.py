@@ -47,6 +47,10 @@ class SimOracleSegmenter:
             raise ValueError(f"ambiguity must be 'error' or 'largest', got {ambiguity!r}")
         self.ambiguity = ambiguity
 
+    def per_frame(self, phrases: Sequence[str]) -> bool:
+        """Whether `segment(frame, phrases)` depends on the frame alone: always (ground truth keeps no memory)."""
+        return True
+
     @staticmethod
     def _scene(frame: RGBDFrame) -> tuple[list[SceneObject], dict[str, np.ndarray]]:
         return scene_objects(frame)

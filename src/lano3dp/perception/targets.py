@@ -5,11 +5,16 @@ its previous cloud, as the demonstrations were recorded (`lano3dp.collect`). In 
 a few points in view is taken from those; one not in view at all is looked for in the env's other views
 (`OtherViews`) and taken from there whenever the observation camera cannot see it; one seen nowhere is an error the
 caller sees.
+
+A frame the policy never observes (between two chunks) need not be perceived: `defer` keeps how to render it, and
+it is perceived only when a later frame needs what it would have held (a target hidden there), in order, so every
+cloud the policy sees is the one perceiving every frame gives. Only where perception depends on the frame alone
+(the segmenter's `per_frame`) and no target is followed in the env's other views, which show the present moment.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -33,11 +38,35 @@ class TargetClouds:
 
     def reset(self) -> None:
         self.last: np.ndarray | None = None
-        self.held_clouds = 0  # frames in which a hidden target kept its previous cloud
+        self.deferred: list[tuple[Callable[[], RGBDFrame], int]] = []  # frames not perceived yet, and their steps
+        self.held_clouds = 0  # frames perceived in which a hidden target kept its previous cloud
         self.partly_hidden: list[str] = []  # targets taken from a few points in the first frame
         self.initial_targets: dict[str, list[float]] = {}  # phrase -> centroid (m) in the first frame
 
+    def can_defer(self, phrases: Sequence[str]) -> bool:
+        """Whether the next frame may be left unperceived until a later one needs it (see the module)."""
+        per_frame = getattr(self.observer.segmenter, "per_frame", None)
+        return self.last is not None and not self.views.seen and per_frame is not None and per_frame(phrases)
+
+    def defer(self, frame: Callable[[], RGBDFrame], step: int) -> None:
+        """A frame no window will hold, as a callable that renders it: perceived later only if needed."""
+        self.deferred.append((frame, step))
+
     def __call__(self, frame: RGBDFrame, phrases: Sequence[str], *, step: int) -> np.ndarray:
+        if self.deferred:
+            try:  # every target in view: the frames before this one change nothing
+                clouds = self.observer.observe(frame, phrases).points
+            except PerceptionError:  # one is hidden: it keeps what the frames before held, so perceive them first
+                deferred, self.deferred = self.deferred, []
+                for earlier, at in deferred:
+                    self._perceive(earlier(), phrases, at)
+            else:
+                self.deferred.clear()
+                self.last = clouds
+                return clouds
+        return self._perceive(frame, phrases, step)
+
+    def _perceive(self, frame: RGBDFrame, phrases: Sequence[str], step: int) -> np.ndarray:
         try:
             clouds = self.observer.observe(frame, phrases).points
         except PerceptionError:

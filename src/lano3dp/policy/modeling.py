@@ -121,6 +121,18 @@ class ChunkedControl:
         self._action_queue: deque[torch.Tensor] = deque()
         self.last_chunk: ActionChunk | None = None
 
+    def observation_needed(self) -> bool:
+        """Whether the observation the next `select_action` pushes can reach a sampled window: False while at
+        least n_obs_steps more actions are queued, since as many later observations push it out first."""
+        return len(self._action_queue) < self.config.n_obs_steps
+
+    def select_queued_action(self) -> torch.Tensor:
+        """`select_action` for a step whose observation no window will hold (`observation_needed` is False): the
+        next queued action, the same as `select_action` returns, without building that observation."""
+        if self.observation_needed():
+            raise RuntimeError("the next observation reaches a sampled window; pass it to select_action")
+        return self._action_queue.popleft()
+
     def select_action(self, obs: Mapping[str, np.ndarray | torch.Tensor], sample: SampleFn | None = None,
                       **sample_kwargs) -> torch.Tensor:
         """One control step: push one observation, sample a chunk when no action is queued, pop one action.

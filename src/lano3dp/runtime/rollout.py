@@ -11,7 +11,7 @@ import numpy as np
 
 from lano3dp.env_factory import NonFiniteObservationError
 from lano3dp.errors import Lano3dpError
-from lano3dp.geometry.frame import RGBDFrame, observe
+from lano3dp.geometry.frame import RGBDFrame, observe, observed_state
 from lano3dp.guidance.shapes import describe_obstacle
 from lano3dp.runtime.runner import PolicyRunner
 
@@ -38,8 +38,9 @@ class EpisodeResult:
             (`describe_obstacle`).
         held_radius: m, the held extent in Q* ("sphere") or the swept body's reach.
         held_clouds, partly_hidden, seen_from_other_views, targets: what perception did (`TargetClouds`,
-            `OtherViews`): clouds carried over while hidden, targets taken from a few points, objects found only in
-            other views, each target's first centroid (m).
+            `OtherViews`): clouds carried over while hidden (in the frames perceived: one the policy does not
+            observe is perceived only when a later frame needs it), targets taken from a few points, objects
+            found only in other views, each target's first centroid (m).
         stale_obstacle_fits: re-fits that kept the last fit because the camera saw too little of an obstacle.
         filters: per chunk filter, what it did over the episode (e.g. {"follow": {"steps": 3}}).
         error: why the episode ended early (perception failure, no clear chunk), or None.
@@ -126,6 +127,20 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
     """
     if success_at not in SUCCESS_AT:
         raise ValueError(f"success_at must be one of {', '.join(SUCCESS_AT)}, got {success_at!r}")
+    # An env that can render a moment later (the built-in simulator) renders only the frames the runner looks at;
+    # every frame when a callback wants each one.
+    later = getattr(env, "frame_later", None) if on_frame is None else None
+    if later is not None:
+        env.defer_images(True)
+    try:
+        return _rollout(env, runner, seed, options, max_steps, on_frame, on_reset, success_at, later)
+    finally:
+        if later is not None:
+            env.defer_images(False)
+
+
+def _rollout(env, runner: PolicyRunner, seed: int, options, max_steps, on_frame, on_reset, success_at: str,
+             later: Callable[[], Callable[[], RGBDFrame]] | None) -> EpisodeResult:
     started = time.perf_counter()
     runner.reset(seed, other_views=getattr(env, "other_views", None))
     obs, info = env.reset(seed=seed, options=dict(options or {}))
@@ -143,6 +158,8 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
     while not (success and success_at == "first"):
         if max_steps is not None and steps >= max_steps:
             break
+        if frame is None and runner.reads_frame():
+            frame = later()  # rendered if the runner's policy observes it, or a later frame needs it
         try:
             action = runner.act(frame, state, obs)
         except Lano3dpError as failure:  # perception or checked execution: the episode fails, the eval goes on
@@ -154,7 +171,10 @@ def rollout(env, runner: PolicyRunner, *, seed: int, options: Mapping[str, Any] 
             error = f"{type(failure).__name__}: {failure}"
             break
         steps += 1
-        frame, state = observe(env, obs)
+        if later is not None:
+            frame, state = None, observed_state(obs)  # the frame is made when the runner asks for it
+        else:
+            frame, state = observe(env, obs)
         positions.append(state[:3].copy())
         reported = bool(info.get("success", False))
         success = reported if success_at == "end" else success or reported

@@ -116,6 +116,7 @@ class PolicyRunner:
         self.filters = build_filters(guidance.execution)
         self.target_phrases = tuple(pc.object_names)
         self.visual_fn = visual_fn or (lambda frame: pc.observation.runtime_input(self, frame))
+        self._own_visual = visual_fn is None  # the observation types' inputs: frame by frame (objects: `targets`)
         self.seed = seed
         self.set_objects(target_phrases, obstacle_phrases, held_object)
         self.reset()
@@ -204,13 +205,24 @@ class PolicyRunner:
                                   f"{record.predicted_clearance:.3f} m")
         return ActionChunk(proposal.actions, proposal.trajectory)
 
-    def act(self, frame: RGBDFrame, state: np.ndarray, obs: Mapping[str, Any] | None = None) -> np.ndarray:
+    def act(self, frame: RGBDFrame | Callable[[], RGBDFrame], state: np.ndarray,
+            obs: Mapping[str, Any] | None = None) -> np.ndarray:
         """Observe, let the policy re-plan (through `plan`) when its queue is empty, and return the next (10,)
         absolute EE action. Call it every env step; with a time stride S it observes every S-th step and spreads
-        each policy action over S env actions (`interpolate_action`)."""
+        each policy action over S env actions (`interpolate_action`).
+
+        `frame` may be a callable that renders it (`TabletopEnv.frame_later`): a frame no sampled window will hold
+        is then not rendered, and not perceived unless a later frame needs it (`TargetClouds.defer`)."""
         if not self.env_actions:
-            action = self.policy.select_action(self.policy_input(frame, state, obs),
-                                               sample=partial(self.plan, frame, state))
+            if self._observation_unused():
+                later = frame if callable(frame) else (lambda: frame)
+                if self.policy_config.observation.object_slots:
+                    self.targets.defer(later, self.step_count)
+                action = self.policy.select_queued_action()
+            else:
+                frame = frame() if callable(frame) else frame
+                action = self.policy.select_action(self.policy_input(frame, state, obs),
+                                                   sample=partial(self.plan, frame, state))
             target = action[0].detach().cpu().numpy().astype(np.float32)
             if self.time_stride == 1:
                 self.env_actions.append(target)
@@ -222,6 +234,17 @@ class PolicyRunner:
         self.step_count += 1
         self.commanded = self.env_actions.popleft()
         return self.commanded
+
+    def reads_frame(self) -> bool:
+        """Whether the next `act` looks at its frame at all (with a time stride S, one step in S does)."""
+        return not self.env_actions
+
+    def _observation_unused(self) -> bool:
+        """This step's observation reaches no sampled window and building it changes nothing later."""
+        needed = getattr(self.policy, "observation_needed", None)  # a policy without `ChunkedControl` observes always
+        if needed is None or needed() or not self._own_visual:
+            return False
+        return not self.policy_config.observation.object_slots or self.targets.can_defer(self.target_phrases)
 
     def episode_facts(self) -> dict[str, Any]:
         """What the runner knows of the episode so far, for `EpisodeResult`."""

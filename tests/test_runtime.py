@@ -442,6 +442,24 @@ def test_image_and_scene_policies_get_their_own_inputs(observer):
     assert (cloud[..., 2] > 0).all()  # the table is removed
 
 
+@pytest.mark.parametrize("obs_type", ["objects", "scene", "image"])
+def test_every_policy_samples_the_same_windows_whether_or_not_unobserved_frames_are_built(observer, obs_type):
+    def sampled_windows(build_every_frame: bool) -> list[dict]:
+        policy = FakePolicy(obs_type)
+        # an own visual function (the type's, here): the runner cannot know it keeps no state, so builds every one
+        runner = PolicyRunner(policy, observer, visual_fn=(lambda frame: policy.config.observation.runtime_input(
+            runner, frame)) if build_every_frame else None)
+        rollout(FakeEnv([BOWL, PAN]), runner, seed=0, max_steps=20)
+        return [call["obs"] for call in policy.calls]
+
+    built, skipped = sampled_windows(True), sampled_windows(False)
+    assert len(built) == len(skipped) >= 2
+    for ours, theirs in zip(skipped, built, strict=True):
+        assert ours.keys() == theirs.keys()
+        for key in ours:
+            torch.testing.assert_close(torch.as_tensor(ours[key]), torch.as_tensor(theirs[key]))
+
+
 def test_a_target_hidden_after_the_first_frame_keeps_its_previous_cloud(observer):
     env = FakeEnv([BOWL, PAN])
     obs, _ = env.reset(seed=0)

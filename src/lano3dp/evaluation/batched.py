@@ -8,8 +8,8 @@ steps): the observation windows concatenated, each episode's own noise generator
 alone), each guided episode's own obstacle cost (`BatchedCost`: row i is costed by episode i's obstacles).
 
 Threads rather than processes: the envs' simulation and perception are what the threads interleave (their CPU time
-counts as before); one torch thread does every sampling call. Each thread builds and renders its own env, so an
-offscreen GL context is only ever current in the thread that made it. The threads take turns (`Batcher.turn`): one
+counts as before); one torch thread does every sampling call. Each thread builds and renders its own env (their
+renderers draw in turn in one shared GL context, `sim.render`). The threads take turns (`Batcher.turn`): one
 works from one chunk request to the next while the others wait, instead of all switching every few milliseconds
 (the GIL's interval) with 16 working sets in one core's caches; that cost 11-14% more CPU per batched evaluation
 (two runs each, 50 episodes at batch 16), and nothing runs in parallel on one torch thread anyway.

@@ -51,7 +51,7 @@ NOT_OBJECTS = frozenset(
     themselves vicinity surroundings none dear kitchen room house home lab office fortune favour favor look try
     go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space
     step other others rest help lot bathroom garage studio workshop classroom nursery bedroom hallway basement attic
-    cellar lounge pantry""".split()  # rooms: "in the garage: open the drawer" names where, no object
+    cellar lounge pantry""".split()  # a room names where ("in the garage: open the drawer"); "thanks a lot"
 ) - {"obstacle?"}
 # Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.
 UNITS = frozenset(

@@ -132,6 +132,7 @@ _COLLISION_VERBS = frozenset(
 )
 # Places to set an object down that no skill puts things on.
 _SURFACES = frozenset("table counter countertop worktop floor ground side desk shelf surface".split())
+_WISHES = (("i", "want"), ("i", "'d", "like"), ("i", "would", "like"), ("i", "need"))  # before a wanted placement
 _PLACEMENT_MODALS = frozenset("needs need has have to should must can will ought".split())
 _ROBOT_PARTS = frozenset("gripper grippers hand hands arm arms finger fingers elbow wrist claw".split())
 _OWN_BODY = frozenset("your the its my yourself robot".split()) | _ROBOT_PARTS
@@ -2486,7 +2487,6 @@ def _own_body(words: list[str]) -> list[str]:
 
 
 # After a side said behind a noun, words that are not the next noun it could be said of ("... on the right some water")
-_WISHES = (("i", "want"), ("i", "'d", "like"), ("i", "would", "like"), ("i", "need"))  # before a wanted placement
 _NOT_SAID_OF = _BOUNDARY | NOT_OBJECTS | SUBJECT_VERBS | _REMAIN_VERBS | DETERMINERS | _RISK_MODALS  # "... might tip"
 
 

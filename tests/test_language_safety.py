@@ -472,6 +472,9 @@ REFUSALS = [
     # "careful" asks for care, but what follows "not" is what not to do: touching the phone it places (table 28)
     (ContradictionError, "put the phone on the charger, careful not to touch the phone", "'careful not to touch' says"),
     (UnknownVerbError, "i want the vase in the drawer to stay", "it has no verb that asks for a task"),
+    # found by the blind table 31: the task asked again on another object, with no verb of its own
+    (SeveralTasksError, "put the red block in the drawer and then the blue one", "asks for the task again"),
+    (SeveralTasksError, "pour the bowl into the pan, then the green one too", "asks for the task again"),
     (UnknownVerbError, "i don't want the phone on the charger", "no skill fits"),
     (NegatedCommandError, "Please don't move the block into the drawer", "'don't move the block into the drawer'"),
     (SeveralTasksError, "Open the drawer and put the block in it",
@@ -726,6 +729,13 @@ NOT_REFUSED = [
     ("put the spark plug in the drawer, stay clear of the oil can",
      ("put_item_in_drawer", ["spark plug", "drawer"], ["oil can"])),
     ("Could you open the bottom drawer? Thanks a lot!", ("open_drawer", ["bottom drawer"], [])),
+    # found by the blind table 31: what a person did is no part of an object's name ("my son spent ..."); a cafe
+    # names where; a list of obstacles after "and then" before a comma is no repeated task
+    ("my son spent all morning on that lego tower so please don't knock it over. put the block in the drawer",
+     ("put_item_in_drawer", ["block", "drawer"], ["lego tower"])),
+    ("hello from the cafe! put the phone on the charger, mind the espresso cup",
+     ("phone_on_base", ["phone", "base"], ["espresso cup"])),
+    ("avoid the mug and then the vase, open the drawer", ("open_drawer", ["drawer"], ["mug", "vase"])),
 ]
 
 

@@ -51,7 +51,7 @@ NOT_OBJECTS = frozenset(
     themselves vicinity surroundings none dear kitchen room house home lab office fortune favour favor look try
     go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space
     step other others rest help lot bathroom garage studio workshop classroom nursery bedroom hallway basement attic
-    cellar lounge pantry""".split()  # a room names where ("in the garage: open the drawer"); "thanks a lot"
+    cellar lounge pantry cafe""".split()  # a room names where ("in the garage: open the drawer"); "thanks a lot"
 ) - {"obstacle?"}
 # Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.
 UNITS = frozenset(
@@ -565,8 +565,8 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             # "stand" is also a verb (not after a plural: "the cups stand on the left")
             end += 1
             continue
-        if end > j and singular(words[end - 1]) in PEOPLE and _third_person_verb(word):
-            break  # "before my mum visits": a person's verb, not a "mum visit"
+        if end > j and singular(words[end - 1]) in PEOPLE and (_third_person_verb(word) or past_verb_form(word)):
+            break  # "before my mum visits", "my son spent all morning": a person's verb, not a "mum visit"
         if word in ("half", "partly", "almost") and end > j and words[end + 1 : end + 2] and (
             past_verb_form(words[end + 1]) or words[end + 1] in ("done", "full", "empty", "open", "built")
         ):

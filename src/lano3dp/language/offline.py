@@ -788,6 +788,10 @@ class OfflineDecomposer:
         in it", "..., then close the microwave") and have no skill in common. A clause of only generic verbs
         ("take the bowl and pour it") counts only when it says where to ("put it in the drawer")."""
         tokens = parse.tokens
+        repeat = _task_repeated_on(tokens, OBJECT_NOUNS | {w for entry in self._vocabulary for w in entry.split()})
+        if repeat is not None:
+            raise SeveralTasksError(instruction, f"'{repeat}' asks for the task again on another object; a plan "
+                                                 "runs one skill on its objects, so give them one at a time")
         clause_of = _running_count(tokens, _TASK_BREAKS)
         clauses: dict[int, list[tuple[int, str]]] = {}
         for position, verb in parse.verb_at:
@@ -1206,6 +1210,8 @@ class OfflineDecomposer:
                 continue
             if nouns and (word in _STANCE or word in SUBJECT_VERBS or word.endswith("ing") and len(word) > 4):
                 break  # "the phone case lying next to it", "the vase stays put": a verb ends the noun phrase
+            if nouns and singular(nouns[-1]) in PEOPLE and past_verb_form(word):
+                break  # "my son spent all morning on it": what the person did
             if nouns and word in _DETACHABLE:
                 nouns.append(word)  # "the pan lid": a lid is an object of its own, not the pan
                 continue
@@ -2012,6 +2018,31 @@ def _may_happen(tokens: Sequence[str], i: int) -> bool:
     return i >= 2 and tokens[i - 1] in _MODALS_AFTER_SUBJECT and tokens[i - 2].isalpha() and (
         tokens[i - 2] not in _POLITE and "NOUN" in word_classes(tokens[i - 2])
         or tokens[i - 2] in ("it", "they", "which", "and"))  # "the glass is full and could spill"
+
+
+def _task_repeated_on(tokens: Sequence[str], object_words: set[str]) -> str | None:
+    """ "put the red block in the drawer and then the blue one", "..., then the green one too": a noun phrase
+    alone after "and then" / "then", or with "too" / "as well", repeats the task on another object. The words
+    said, or None. `object_words`: nouns the lexicon may not class as nouns ("pan")."""
+    for i, word in enumerate(tokens):
+        opener = word == "then" and i > 0 and tokens[i - 1] in ("and", ",")
+        if not opener and not (word == "and" and tokens[i + 1 : i + 2] in (["also"], ["the"], ["a"])):
+            continue
+        k = i + 1 + (tokens[i + 1 : i + 2] == ["also"])
+        if tokens[k : k + 1] not in (["the"], ["a"], ["an"], ["that"], ["this"]):
+            continue
+        end = k + 1
+        while end < len(tokens) and tokens[end].isalpha() and (tokens[end] in _MODIFIERS or tokens[end] in COLOURS or (
+            "NOUN" in word_classes(tokens[end]) or singular(tokens[end]) in object_words or tokens[end] == "one"
+        )) and tokens[end] not in _BOUNDARY:
+            end += 1
+        rest = tokens[end:]
+        too = rest[:1] == ["too"] or rest[:2] == ["as", "well"]
+        rest = rest[1 if rest[:1] == ["too"] else 2 if too else 0 :]
+        alone = not rest or rest[0] in _SENTENCE_END
+        if end > k + 1 and alone and (opener or too):
+            return " ".join(tokens[i - opener : end])
+    return None
 
 
 def _after_wanted_object(tokens: Sequence[str], position: int) -> bool:

@@ -12,8 +12,9 @@ new `MjrContext`, which is cheap for the primitive-only scene.
 Renderers of several threads (batched evaluation: one env per thread) take turns: MuJoCo releases the GIL while
 it draws, and Mesa's software rasteriser crashed (a segfault in swrast_dri.so) when two threads drew into their
 own contexts at once. Taking turns costs no CPU time; the threads' other work still interleaves. They also share
-one GL context, current only while one of them draws: each new context cost Mesa about 60 ms of set-up at its
-first scene, 1 CPU-s of a 15 CPU-s batched evaluation of 50 episodes with 16 envs.
+one GL context, current only while one of them draws (where the backend can release it: MuJoCo 4's
+`as_current`): each new context cost Mesa about 60 ms of set-up at its first scene, 1 CPU-s of a 15 CPU-s batched
+evaluation of 50 episodes with 16 envs.
 """
 
 from __future__ import annotations
@@ -31,13 +32,17 @@ _GL_TURN = threading.RLock()  # one thread's GL work at a time, process-wide (se
 _SHARED_GL: dict[tuple[int, int], object] = {}  # (width, height) -> the GL context every renderer of it draws in
 
 
-def _shared_gl(width: int, height: int):
-    """(Holding _GL_TURN.) The process's GL context for images of this size; made at first use."""
+def _gl_context(width: int, height: int) -> tuple[object, bool]:
+    """(Holding _GL_TURN.) (the GL context to draw in, whether it is this renderer's own): the process's shared
+    one for images of this size, made at first use; a context of one's own where the backend cannot release a
+    context from a thread (no `as_current`, as in older MuJoCo), since a shared one would stay bound to the first."""
     from mujoco.gl_context import GLContext  # MuJoCo 4.x also has it under mujoco.rendering.classic
 
+    if not hasattr(GLContext, "as_current"):
+        return GLContext(width, height), True
     if (width, height) not in _SHARED_GL:
         _SHARED_GL[width, height] = GLContext(width, height)
-    return _SHARED_GL[width, height]
+    return _SHARED_GL[width, height], False
 
 
 @dataclass
@@ -57,7 +62,7 @@ class FusedRenderer:
     def __init__(self, width: int = 128, height: int = 128):
         self.width, self.height = int(width), int(height)
         with _GL_TURN:
-            self._gl = _shared_gl(self.width, self.height)
+            self._gl, self._own_gl = _gl_context(self.width, self.height)
         self._model: mujoco.MjModel | None = None
         self._context: mujoco.MjrContext | None = None
         self._scene: mujoco.MjvScene | None = None
@@ -72,11 +77,10 @@ class FusedRenderer:
             self._set_model(model)
 
     def _current(self):
-        """The shared context made current in this thread for the block, and released after it (another
-        thread's renderer draws in it next); a backend without `as_current` keeps it current."""
-        as_current = getattr(self._gl, "as_current", None)
-        if as_current is not None:
-            return as_current()
+        """The context made current in this thread for the block: the shared one is released after it (another
+        thread's renderer draws in it next), one's own stays current."""
+        if not self._own_gl:
+            return self._gl.as_current()
         self._gl.make_current()
         return contextlib.nullcontext()
 
@@ -171,6 +175,8 @@ class FusedRenderer:
                 with self._current():
                     self._context.free()
                 self._context = None
+            if self._own_gl:
+                self._gl.free()
             self._gl = None
 
     def __del__(self):

@@ -8,7 +8,9 @@ reference below is written again:
 
 The episodes cover what a refactor of the runtime could move without meaning to: a clean scene, a target hidden
 under another object (its cloud carried over), perception that can fail (the error model's per-frame draws), and
-a guided episode beside an obstacle.
+a guided episode beside an obstacle. Float rounding differs between CPU models (torch picks other kernels): 17 of
+40 bowl_pour episodes recorded on an AMD EPYC ended otherwise on an Intel Xeon, with the same code. So the
+reference holds the processor it was recorded on, and on another one the test says so and skips.
 """
 
 from __future__ import annotations
@@ -51,8 +53,9 @@ def replay() -> dict[str, list[dict]]:
 
 
 def write_reference() -> None:
-    """Record the reference episodes at this BEHAVIOUR_VERSION (after bumping it)."""
-    REFERENCE.write_text(json.dumps({"behaviour_version": provenance.BEHAVIOUR_VERSION, "episodes": replay()},
+    """Record the reference episodes at this BEHAVIOUR_VERSION (after bumping it), on this processor."""
+    REFERENCE.write_text(json.dumps({"behaviour_version": provenance.BEHAVIOUR_VERSION,
+                                     "processor": provenance.machine()["processor"], "episodes": replay()},
                                     indent=1) + "\n")
 
 
@@ -61,6 +64,10 @@ def test_reference_episodes_end_as_they_did_at_this_behaviour_version():
     reference = json.loads(REFERENCE.read_text())
     assert reference["behaviour_version"] == provenance.BEHAVIOUR_VERSION, (
         "BEHAVIOUR_VERSION changed: write the reference again (see this module's docstring)")
+    here = provenance.machine()["processor"]
+    if reference["processor"] != here:
+        pytest.skip(f"the reference episodes were recorded on {reference['processor']!r}; float rounding on {here!r} "
+                    "ends some otherwise with the same code (write the reference there to check on it)")
     replayed = replay()
     for name, episodes in reference["episodes"].items():
         assert replayed[name] == episodes, (

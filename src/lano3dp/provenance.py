@@ -9,7 +9,8 @@ how an episode is measured). A cached result counts as current only when it was 
 the commit alone would invalidate a long benchmark at every documentation edit, and a setting-only key let
 behaviour changes that added no setting leave stale results counted as current.
 `tests/test_behaviour_version.py` keeps the number honest: it replays short reference episodes and fails when their
-outcome changes while BEHAVIOUR_VERSION does not.
+outcome changes while BEHAVIOUR_VERSION does not (on the processor model they were recorded on: float rounding
+differs between CPU models, so a stored outcome is the same only there).
 """
 
 from __future__ import annotations

@@ -33,6 +33,7 @@ Reward: 1.0 on success, else 0.0; `terminated` on success, `truncated` at `max_s
 
 from __future__ import annotations
 
+import copy
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -489,9 +490,12 @@ class TabletopEnv(gym.Env):
         self._check_open()
         if self._spare_of is not self.model:
             self._spare, self._spare_of = [], self.model
-        copy = self._spare.pop() if self._spare else mujoco.MjData(self.model)
-        mujoco.mj_copyData(copy, self.model, self.data)
-        return _LaterFrame(self, copy, self._steps)
+        if self._spare and hasattr(mujoco, "mj_copyData"):  # MuJoCo 3.x binds no mj_copyData: a fresh copy there
+            state = self._spare.pop()
+            mujoco.mj_copyData(state, self.model, self.data)
+        else:
+            state = copy.copy(self.data)
+        return _LaterFrame(self, state, self._steps)
 
     def other_views(self) -> list[RGBDFrame]:
         """This moment seen from the other cameras (`other_cameras`), rendered now: they cost a render each,
@@ -581,7 +585,7 @@ class _LaterFrame:
 
     def _release(self) -> None:
         data = getattr(self, "_data", None)
-        if data is not None and self._env._spare_of is self._model:
+        if data is not None and self._env._spare_of is self._model and hasattr(mujoco, "mj_copyData"):
             self._env._spare.append(data)
         self._data = None
 

@@ -193,17 +193,15 @@ _NEGATING_BEFORE = {"no": "need", "off": "hold"}  # "no need to ...", "hold off 
 _DESTINATIONS = frozenset("in into inside onto on".split())
 # Cue words that ask for care with an object rather than distance from it: said of a target they are no
 # contradiction ("pour the bowl, don't spill it"); "avoid" or "don't touch" said of a target is one.
-_NEGATIONS = frozenset("not never no without don't dont".split())  # in a cue, before what not to do
-_PARTS = frozenset("handle rim edge spout lid neck knob cap side corner top bottom".split())  # of the object said
 _CARE_WORDS = frozenset(
     """spill drop break damage scratch smash crack dent tip topple upset knock tilt shake crush fragile delicate
     hot breakable sharp precious valuable wobbly unstable expensive careful caution gently mind fall roll wobble
     tumble shatter""".split()
 )
+_NEGATIONS = frozenset("not never no without don't dont".split())  # in a cue, before what not to do
+_PARTS = frozenset("handle rim edge spout lid neck knob cap side corner top bottom".split())  # of the object said
 # Verbs that say an object may fall ("the bowl might tip"): said of it, it is an obstacle as "fragile" makes it.
 _UNSTEADY_VERBS = frozenset("tip topple fall wobble tumble break shatter crack roll".split())
-_RISK_MODALS = frozenset("might could may can will would".split())
-# Properties that declare the object they are said of an obstacle ("the glass is fragile").
 _DEGREE = frozenset("very quite really extremely super so too rather a bit".split())
 # What may stand between a clause break and its verb ("and then carefully pour").
 _CLAUSE_OPENERS = frozenset(
@@ -231,6 +229,7 @@ _CLAUSE_CLOSE = frozenset(", . ; ! ? and but so".split())
 _UNNEEDED = frozenset("necessary needed required".split())  # "... won't be necessary"
 _NOT_NEEDED = frozenset("not isn't won't wont no never".split())
 _MODALS_AFTER_SUBJECT = frozenset("could would can will might may should".split())
+_RISK_MODALS = _MODALS_AFTER_SUBJECT - {"should"}  # "the bowl might tip" says what may happen
 _WANTING_DONE = frozenset("need needs want wants like".split())  # "I'd like the drawer opened"
 _DISCOURSE = frozenset("actually anyway though however well instead rather sorry oops little one".split())
 _REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
@@ -423,6 +422,7 @@ class OfflineDecomposer:
             | {w for cue in (*_CUES, *_WAY_MARKERS) for w in cue} | {w for v in self._verbs for w in v.split()}
             | {w for entry in self._vocabulary for w in entry.split()}
         )  # fmt: skip
+        self._object_words = OBJECT_NOUNS | {w for entry in self._vocabulary for w in entry.split()}
 
     # ---- public API -------------------------------------------------------------------------
 
@@ -788,7 +788,7 @@ class OfflineDecomposer:
         in it", "..., then close the microwave") and have no skill in common. A clause of only generic verbs
         ("take the bowl and pour it") counts only when it says where to ("put it in the drawer")."""
         tokens = parse.tokens
-        repeat = _task_repeated_on(tokens, OBJECT_NOUNS | {w for entry in self._vocabulary for w in entry.split()})
+        repeat = _task_repeated_on(tokens, self._object_words)
         if repeat is not None:
             raise SeveralTasksError(instruction, f"'{repeat}' asks for the task again on another object; a plan "
                                                  "runs one skill on its objects, so give them one at a time")
@@ -1044,8 +1044,7 @@ class OfflineDecomposer:
             return False
         following = words[i + 1] if i + 1 < len(words) else "."
         intransitive = following in _CLAUSE_CLOSE or following in ("over", "off", "down", "easily", "too", "if")
-        third_person = words[i].endswith("s") and words[i - 1] not in _RISK_MODALS and words[i - 1] not in (
-            DETERMINERS) and words[i - 1].isalpha()
+        third_person = words[i].endswith("s") and words[i - 1].isalpha() and words[i - 1] not in DETERMINERS
         return intransitive and (words[i - 1] in _RISK_MODALS or third_person)
 
     @staticmethod

@@ -67,6 +67,7 @@ WORKSPACE_HIGH = np.array([0.95, 0.55, 0.60])
 CAMERAS = {"front": FRONT_CAMERA, "shifted": SHIFTED_CAMERA, "shifted_left": SHIFTED_LEFT_CAMERA}
 # Physics substeps between obstacle checks / mocap updates within one control step.
 _CHUNK = 5
+_COPY_IN_PLACE = hasattr(mujoco, "mj_copyData")  # MuJoCo 3.x binds none: `frame_later` takes a fresh copy there
 _SETTLE_STEPS = 75  # 0.3 s for objects to come to rest after building
 
 
@@ -490,7 +491,7 @@ class TabletopEnv(gym.Env):
         self._check_open()
         if self._spare_of is not self.model:
             self._spare, self._spare_of = [], self.model
-        if self._spare and hasattr(mujoco, "mj_copyData"):  # MuJoCo 3.x binds no mj_copyData: a fresh copy there
+        if self._spare and _COPY_IN_PLACE:
             state = self._spare.pop()
             mujoco.mj_copyData(state, self.model, self.data)
         else:
@@ -585,7 +586,7 @@ class _LaterFrame:
 
     def _release(self) -> None:
         data = getattr(self, "_data", None)
-        if data is not None and self._env._spare_of is self._model and hasattr(mujoco, "mj_copyData"):
+        if data is not None and self._env._spare_of is self._model and _COPY_IN_PLACE:
             self._env._spare.append(data)
         self._data = None
 

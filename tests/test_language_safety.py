@@ -564,6 +564,13 @@ REFUSALS = [
     (SeveralTasksError, "Open the drawer plus close the microwave", "'close': close_microwave"),
     (SeveralTasksError, "First pour the bowl into the pan and after that sweep the crumbs into the dustpan",
      "'pour': bowl_pour; 'sweep': sweep_to_dustpan"),
+    # found by the blind table 32: advice against the task negates it; a causative asks for each task after it
+    (NegatedCommandError, "it's best not to put the block in the drawer",
+     "'not to put the block in the drawer' asks the robot not to do something, and nothing else is asked"),
+    (NegatedCommandError, "it would be wiser not to open the drawer", "'not to open the drawer' asks the robot"),
+    (NegatedCommandError, "probably a good idea not to water the plant today", "'not to water the plant"),
+    (SeveralTasksError, "get the drawer opened and the block put in it", "'open': open_drawer"),
+    (UnknownVerbError, "i have the drawer opened already", "'have' is not a verb any skill is asked for with"),
 ]  # fmt: skip
 
 
@@ -736,6 +743,13 @@ NOT_REFUSED = [
     ("hello from the cafe! put the phone on the charger, mind the espresso cup",
      ("phone_on_base", ["phone", "base"], ["espresso cup"])),
     ("avoid the mug and then the vase, open the drawer", ("open_drawer", ["drawer"], ["mug", "vase"])),
+    # found by the blind table 32: "get / have the X done" asks for it (not "I have the X opened"); "house" and
+    # "home" begin a compound ("the house plant"), alone they name where
+    ("get the plant watered please, don't splash the sofa", ("water_plants", ["watering can", "plant"], ["sofa"])),
+    ("could you have the microwave closed", ("close_microwave", ["microwave"], [])),
+    ("water the house plant", ("water_plants", ["watering can", "house plant"], [])),
+    ("open the drawer, avoid the house keys", ("open_drawer", ["drawer"], ["house key"])),
+    ("I've done a few jobs around the house, close the microwave", ("close_microwave", ["microwave"], [])),
 ]
 
 

@@ -183,7 +183,11 @@ _NEGATORS = frozenset(
 )
 _ABSTAIN_VERBS = frozenset("refrain skip stop quit cease abstain forget".split())
 # "I'd rather not open ...", "I'd prefer you did not open ..."
-_NOT_AFTER = frozenset("do does did please must should try better need rather would will could can shall".split())
+# ... and advice against it: "it's best not to open ...", "it would be wiser not to pour ..."
+_NOT_AFTER = frozenset(
+    "do does did please must should try better need rather would will could can shall best wiser wise safer safest"
+    " smarter advisable idea prudent".split()
+)
 _NEGATION_FILLER = frozenset(
     "you ever even please try to go and just accidentally dare want need wish from on with bother bothering about mind"
     " necessary needed required"
@@ -231,6 +235,7 @@ _NOT_NEEDED = frozenset("not isn't won't wont no never".split())
 _MODALS_AFTER_SUBJECT = frozenset("could would can will might may should".split())
 _RISK_MODALS = _MODALS_AFTER_SUBJECT - {"should"}  # "the bowl might tip" says what may happen
 _WANTING_DONE = frozenset("need needs want wants like".split())  # "I'd like the drawer opened"
+_CAUSATIVES = frozenset("get have".split())  # "get the plant watered": the object, then what is done
 _DISCOURSE = frozenset("actually anyway though however well instead rather sorry oops little one".split())
 _REMAIN_VERBS = frozenset("stay stays stayed staying remain remains remained".split())
 _STATE_ADVERBS = frozenset("all already still now just not almost nearly half wide".split())
@@ -238,7 +243,7 @@ _STATE_ADVERBS = frozenset("all already still now just not almost nearly half wi
 _SUBJECT_SKIPS = frozenset(
     "also still currently right now just all both each looks seems look seem to remain remains stay stays".split()
 )  # "the green block is to remain untouched"
-_COMPOUND_MODIFIERS = frozenset("water table counter trash soup door lid coffee tea wine".split())
+_COMPOUND_MODIFIERS = frozenset("water table counter trash soup door lid coffee tea wine house home".split())
 _DETACHABLE = frozenset("lid cap cork cover case stopper".split())  # parts that come off: objects of their own
 _MAX_COMPOUND = 3  # words of an object's name: "small red coffee mug" has two, "watering can" two
 _QUANTIFIED = frozenset("any all each every either none both neither".split())  # "any of them"
@@ -1196,7 +1201,9 @@ class OfflineDecomposer:
             if word == "can" and (nouns or after_modifier) and following not in ("be", "you", "i", "we", "not", "now"):
                 nouns.append(word)  # "the tin can", "the soda can", "the left can": a noun after a noun or a modifier
                 continue
-            if word in _COMPOUND_MODIFIERS and not nouns and following not in _BOUNDARY | _NON_OBJECTS | _SENTENCE_END:
+            if word in _COMPOUND_MODIFIERS and not nouns and following.isalpha() and following not in (
+                _BOUNDARY | _NON_OBJECTS
+            ):
                 nouns.append(word)  # "the water bottle", "the table lamp"
                 continue
             if word == "stand" and nouns and singular(nouns[-1]) == nouns[-1]:
@@ -1285,7 +1292,7 @@ class OfflineDecomposer:
             if not hits and not heads:
                 continue
             wanted_done = i >= 2 and task[i - 1].isalpha() and "NOUN" in word_classes(task[i - 1]) and any(
-                w in _WANTING_DONE for w in task[max(0, i - 6) : i - 1])  # "I want the drawer opened"
+                _asks_done(task, k) for k in range(max(0, i - 6), i - 1))  # "I want the drawer opened"
             if past_verb_form(word) and not wanted_done:
                 continue  # "you stood the bottle up yesterday", "I spilled soil": what happened, not a request
             if _may_happen(task, i):
@@ -2050,13 +2057,19 @@ def _after_wanted_object(tokens: Sequence[str], position: int) -> bool:
     k = position - 1
     if k < 0 or not (tokens[k].isalpha() and "NOUN" in word_classes(tokens[k])):
         return False
-    while k >= 0 and tokens[k] not in _TASK_BREAKS and tokens[k] not in _WANTING_DONE and (
+    while k >= 0 and tokens[k] not in _TASK_BREAKS and not _asks_done(tokens, k) and (
         tokens[k] in DETERMINERS or tokens[k] in _MODIFIERS or tokens[k] in COLOURS
         or tokens[k].isalpha() and "NOUN" in word_classes(tokens[k])
     ):
         k -= 1
-    wanted_before = any(w in _WANTING_DONE for w in tokens[:position])
-    return k >= 0 and wanted_before and (tokens[k] in _WANTING_DONE or tokens[k] in ("and", ","))
+    wanted_before = any(_asks_done(tokens, j) for j in range(position))
+    return k >= 0 and wanted_before and (_asks_done(tokens, k) or tokens[k] in ("and", ","))
+
+
+def _asks_done(tokens: Sequence[str], k: int) -> bool:
+    """ "I want (the drawer opened)", "(could you) get / have (the plant watered)": the word before an object asks
+    for what is done to it. After "I", a causative tells how it is ("I have the drawer opened")."""
+    return tokens[k] in _WANTING_DONE or tokens[k] in _CAUSATIVES and not (k and tokens[k - 1] in _NARRATORS)
 
 
 def _running_count(words: Sequence[str], marks) -> list[int]:

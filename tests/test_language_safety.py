@@ -750,6 +750,15 @@ NOT_REFUSED = [
     ("water the house plant", ("water_plants", ["watering can", "house plant"], [])),
     ("open the drawer, avoid the house keys", ("open_drawer", ["drawer"], ["house key"])),
     ("I've done a few jobs around the house, close the microwave", ("close_microwave", ["microwave"], [])),
+    # found by the blind table 33: "a coil of X" names X; the state after "get / keep the X" is no part of its
+    # name; the unsaid watering can said as "the can" is the tool, not an obstacle; shops and events name
+    # where and when
+    ("open the drawer, there's a coil of hose beside it", ("open_drawer", ["drawer"], ["hose"])),
+    ("water the fern but don't get the newspapers wet", ("water_plants", ["watering can", "plant"], ["newspaper"])),
+    ("water the plant on the left, the one on the right is drowning so keep the can away from it",
+     ("water_plants", ["watering can", "left plant"], ["right plant"])),
+    ("we're opening the shop in ten minutes, close the microwave", ("close_microwave", ["microwave"], [])),
+    ("open the wine bottle for the party please", ("open_wine_bottle", ["bottle"], [])),
 ]
 
 

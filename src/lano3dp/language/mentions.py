@@ -51,7 +51,9 @@ NOT_OBJECTS = frozenset(
     themselves vicinity surroundings none dear kitchen room house home lab office fortune favour favor look try
     go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space
     step other others rest help lot bathroom garage studio workshop classroom nursery bedroom hallway basement attic
-    cellar lounge pantry cafe""".split()  # a room names where ("in the garage: open the drawer"); "thanks a lot"
+    cellar lounge pantry cafe bakery shop store supermarket market restaurant canteen cafeteria picnic party
+    meeting breakfast brunch lunch dinner supper""".split()  # rooms, shops and events name where and when ("in the
+    # garage: open the drawer", "we're closing the bakery soon", "for the picnic"); "thanks a lot"
 ) - {"obstacle?"}
 # Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.
 UNITS = frozenset(
@@ -573,6 +575,8 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             break  # "a jigsaw puzzle half done": how far along it is, no part of its name
         if word == "old" and end > j and words[end - 1] in ("year", "years", "month", "months"):
             return end + 1  # "my 2 year old keeps grabbing it": a child (its number was no word), no object
+        if end > j and _result_state(words, j, end):
+            break  # "don't get the charts wet", "keep the rug dry": the state wanted, no part of the name
         if end > j and _verb_with_object(words, end):
             break  # "the mug blocks the way", "the cat knocks it": the verb after its subject, with its object
         if end > j and (word in ("avoid", "mind", "beware") or word in ("watch", "look") and words[end + 1 : end + 2]
@@ -603,6 +607,20 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
         else:
             break
     return end
+
+
+_STATE_VERBS = frozenset("get gets getting got keep keeps keeping kept leave leaves leaving left make makes".split())
+
+
+def _result_state(words: Sequence[str], j: int, end: int) -> bool:
+    """The adjective at `end` closes a clause whose verb makes or keeps the noun phrase from `j` so ("get the charts
+    wet", "leave the towel dry,"): the state, said after its object."""
+    if "ADJ" not in word_classes(words[end]) or words[end + 1 : end + 2] not in [*_SENTENCE_ENDS, [","], ["?"]]:
+        return False
+    k = j - 1
+    while k >= 0 and (words[k] in _DETERMINERS or words[k] in _MODIFIERS):
+        k -= 1
+    return k >= 0 and words[k] in _STATE_VERBS
 
 
 _LOOKING_FOR = frozenset((verb, "for") for verb in "look looking search searching".split())

@@ -1712,6 +1712,9 @@ class OfflineDecomposer:
             before = [n for n in before if n.name not in _SURFACES and n.name not in NOT_OBJECTS
                       and not named_in_passing(n.name, parse.tokens, n.index, n.index + len(n.name.split()))]
             others = [n for n in before if not any(_same_thing(skill, n, t) for t in targets)]
+            # "water the plant, keep the can away from it": the unsaid watering can, named by its head, is the tool
+            unsaid = [ObjectRef(name=slot.word) for k, slot in enumerate(skill.slots) if k not in assigned]
+            others = [n for n in others if not any(_short_for(n.ref(), ref) for ref in unsaid)]
             if reference.kind == "other":
                 others = self._other_one(skill, reference, before, others, targets, parse)
             declared_before = [k for k, _ in parse.declared if k < reference.index]
@@ -2205,7 +2208,7 @@ def _partitives(words: list[str]) -> list[str]:
 _INSIDE_OR_ON = frozenset("in into inside on onto".split())
 _QUANTITY_NOUNS = frozenset(
     """couple pair lot lots loads load bunch bunches pile piles stack stacks heap heaps handful number dozen dozens
-    plenty row rows set group collection bundle cluster""".split()
+    plenty row rows set group collection bundle cluster coil coils""".split()
 )
 
 

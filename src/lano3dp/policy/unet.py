@@ -31,6 +31,18 @@ class SinusoidalPosEmb(nn.Module):
         return torch.cat([angles.sin(), angles.cos()], dim=-1)
 
 
+def _run(module: nn.Module, x: torch.Tensor) -> torch.Tensor:
+    """module(x) through `forward`, skipping nn.Module.__call__'s hook dispatch: the UNet makes ~180 module calls a
+    pass, and at batch 1 that dispatch was 40% of a pass on one core (2.4 vs 1.5 ms; the same ops, the same bits).
+    torch.jit.trace saves the same but is deprecated in torch 2.13, and a torch.export module runs slower than eager.
+    No hooks are registered on the UNet's parts; one registered there would not run."""
+    if isinstance(module, nn.Sequential):
+        for child in module:
+            x = _run(child, x)
+        return x
+    return module.forward(x)
+
+
 class Conv1dBlock(nn.Sequential):
     """Conv1d (same length) + GroupNorm + Mish."""
 
@@ -52,10 +64,10 @@ class ConditionalResidualBlock1D(nn.Module):
                               else nn.Identity())
 
     def forward(self, x: torch.Tensor, cond: torch.Tensor) -> torch.Tensor:
-        out = self.blocks[0](x)
-        scale, bias = self.cond_encoder(cond).unsqueeze(-1).chunk(2, dim=1)
-        out = self.blocks[1](scale * out + bias)
-        return out + self.residual_conv(x)
+        out = _run(self.blocks[0], x)
+        scale, bias = _run(self.cond_encoder, cond).unsqueeze(-1).chunk(2, dim=1)
+        out = _run(self.blocks[1], scale * out + bias)
+        return out + _run(self.residual_conv, x)
 
 
 class ConditionalUnet1D(nn.Module):
@@ -108,16 +120,16 @@ class ConditionalUnet1D(nn.Module):
         if not torch.is_tensor(timestep):
             timestep = torch.tensor([timestep], device=sample.device)
         timestep = timestep.reshape(-1).expand(sample.shape[0]).to(sample.dtype)  # the embedding in the sample's dtype
-        cond = torch.cat([self.diffusion_step_encoder(timestep), global_cond], dim=-1)
+        cond = torch.cat([_run(self.diffusion_step_encoder, timestep), global_cond], dim=-1)
         x = sample.transpose(1, 2)
         skips = []
         for first, second, downsample in self.down_modules:
-            x = second(first(x, cond), cond)
+            x = second.forward(first.forward(x, cond), cond)
             skips.append(x)
-            x = downsample(x)
+            x = _run(downsample, x)
         for module in self.mid_modules:
-            x = module(x, cond)
+            x = module.forward(x, cond)
         for first, second, upsample in self.up_modules:
             x = torch.cat([x, skips.pop()], dim=1)
-            x = upsample(second(first(x, cond), cond))
-        return self.final_conv(x).transpose(1, 2)
+            x = _run(upsample, second.forward(first.forward(x, cond), cond))
+        return _run(self.final_conv, x).transpose(1, 2)

@@ -142,7 +142,7 @@ class GripperHandle:
     def command(self, data: mujoco.MjData, position, quat, grip: float) -> None:
         data.mocap_pos[self.mocap_id] = position
         data.mocap_quat[self.mocap_id] = quat
-        data.ctrl[self.actuator_id] = float(np.clip(grip, 0.0, 1.0)) * self.close_target
+        data.ctrl[self.actuator_id] = min(max(float(grip), 0.0), 1.0) * self.close_target
 
     def target(self, data: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
         return data.mocap_pos[self.mocap_id].copy(), data.mocap_quat[self.mocap_id].copy()

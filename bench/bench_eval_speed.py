@@ -7,17 +7,18 @@ run, so the ratios hold on a busy machine (the absolute numbers do not). Parts, 
                importing diffusers costs, which every policy load paid before the own DDPM/DDIM steps
     sampling   predict_action_chunk: CPU ms per chunk at batch 1 and per chunk at batch --batch (DDIM-10), median
                over --chunks calls
-    modes      `evaluate` of --episodes clean episodes (unguided) and --episodes obstacle episodes (obstacle scenes
-               only, the checkpoint's tuned guidance):
+    modes      after one untimed episode of each condition (`warm_up`), `evaluate` of --episodes clean episodes
+               (unguided) and --episodes obstacle episodes (obstacle scenes only, the checkpoint's tuned guidance):
                    sequential   one episode after another (EvalConfig(batch=1))
-                   batched      --batch episodes stepped together, their chunks sampled in one call
+                   batched      --batch episodes stepped together, their chunks sampled in one call, and the
+                                same for each --also-batch (50: the whole evaluation at once)
                each with its per-episode outcomes (success, steps, contact), compared episode by episode, and
                the largest difference in an episode's minimum clearance to the obstacle
 
 50 episodes, a table's size, so that the batch stays full for most of the run: at 24 the later episodes end
 nearly alone and the batched ratio falls (1.22 clean at 24, 1.96 at 50, one run each).
 
-    OMP_NUM_THREADS=1 python bench/bench_eval_speed.py                  # ~6 CPU-minutes
+    OMP_NUM_THREADS=1 python bench/bench_eval_speed.py                  # ~5 CPU-minutes
     OMP_NUM_THREADS=1 python bench/bench_eval_speed.py --episodes 4 --chunks 5 --tag _smoke
 """
 
@@ -110,6 +111,15 @@ def chunk_costs(task: str, chunks: int, batch: int) -> dict[str, Any]:
             "batch": batch, "chunks": chunks, "alone_over_batched": round(alone_ms / together_ms, 2)}
 
 
+def warm_up(task: str, seed: int) -> None:
+    """One untimed episode of each condition, so that neither mode pays what a process pays once (the English
+    lexicon of the scene's object names, the first GL context, lazy imports): the sequential mode, timed first,
+    paid them before."""
+    for condition in CONDITIONS.values():
+        condition = dict(condition, guidance=GuidanceChoice(condition["guidance"]))
+        evaluate(EvalConfig(task=task, episodes=1, seed=seed, **condition))
+
+
 def run_mode(task: str, episodes: int, seed: int, batch: int) -> dict[str, Any]:
     """`evaluate` of every condition in this process: its CPU time and per-episode outcomes."""
     results = {}
@@ -142,19 +152,41 @@ def clearance_difference(a: dict, b: dict) -> float | None:
     return float("inf") if x is None or y is None else abs(x - y)
 
 
+def batched_modes(record: dict[str, Any]) -> list[tuple[int, dict, dict]]:
+    """(batch, mode, comparisons) of every batched mode of a record: --batch, then each --also-batch."""
+    modes = [(record["config"]["batch"], record["modes"]["batched"], record["comparisons"])]
+    for batch, comparisons in record.get("comparisons_also", {}).items():
+        modes.append((int(batch), record["modes"][f"batched_{batch}"], comparisons))
+    return modes
+
+
+def compare(sequential: dict, batched: dict) -> dict[str, Any]:
+    """Per condition: the ratio of episodes per CPU-second and how many episodes ended the same."""
+    comparisons = {}
+    for name in CONDITIONS:
+        pairs = list(zip(sequential[name]["outcomes"], batched[name]["outcomes"], strict=True))
+        differences = [d for d in (clearance_difference(a, b) for a, b in pairs) if d is not None]
+        comparisons[name] = {
+            "batched_over_sequential": round(batched[name]["episodes_per_cpu_s"]
+                                             / sequential[name]["episodes_per_cpu_s"], 2),
+            "same_outcomes": sum(same_outcome(a, b) for a, b in pairs), "episodes": len(pairs),
+            "largest_clearance_difference_m": max(differences) if differences else None}
+    return comparisons
+
+
 def markdown(record: dict[str, Any]) -> str:
     rows = []
-    for name in CONDITIONS:
-        sequential, batched = record["modes"]["sequential"][name], record["modes"]["batched"][name]
-        comparison = record["comparisons"][name]
-        largest = comparison["largest_clearance_difference_m"]
-        rows.append([name, sequential["episodes"], sequential["episodes_per_cpu_s"], batched["episodes_per_cpu_s"],
-                     comparison["batched_over_sequential"],
-                     f"{comparison['same_outcomes']} of {sequential['episodes']}",
-                     "no obstacle" if largest is None else f"{largest:.1e}"])
+    for batch, batched, comparisons in batched_modes(record):
+        for name in CONDITIONS:
+            sequential, comparison = record["modes"]["sequential"][name], comparisons[name]
+            largest = comparison["largest_clearance_difference_m"]
+            rows.append([name, batch, sequential["episodes"], sequential["episodes_per_cpu_s"],
+                         batched[name]["episodes_per_cpu_s"], comparison["batched_over_sequential"],
+                         f"{comparison['same_outcomes']} of {sequential['episodes']}",
+                         "no obstacle" if largest is None else f"{largest:.1e}"])
     sampling = record["sampling"]
     return ("# Evaluation speed: sequential and batched\n\n## Episodes per CPU-second\n\n"
-            + markdown_table(["condition", "episodes", "sequential", f"batched ({record['config']['batch']})",
+            + markdown_table(["condition", "batch", "episodes", "sequential", "batched",
                               "ratio", "same outcome (success, steps, contact)",
                               "largest clearance difference (m)"], rows)
             + f"\n\nDDIM-10 chunk: {sampling['cpu_ms_per_chunk_alone']} CPU-ms alone, "
@@ -167,26 +199,25 @@ def main(argv: list[str] | None = None) -> None:
     parser = bench_parser(__file__, __doc__, tasks="put_item_in_drawer", episodes=50, seed=1_000_000,
                           workers=Unused("batched evaluation runs in one process; the ratio is per CPU-second"))
     parser.add_argument("--batch", type=int, default=16, help="episodes stepped together in the batched mode")
+    parser.add_argument("--also-batch", type=int, nargs="*", default=[50],
+                        help="further batch sizes measured in the same run (50: a 50-episode evaluation at once)")
     parser.add_argument("--chunks", type=int, default=20, help="sampling calls timed")
     args = parse(parser, argv)
     torch.set_num_threads(1)
     (task,) = args.tasks
     body: dict[str, Any] = {"load": load_cost(task), "sampling": chunk_costs(task, args.chunks, args.batch)}
     print(f"load {body['load']}\nsampling {body['sampling']}", flush=True)
+    warm_up(task, args.seed - 1)
     body["modes"] = {"sequential": run_mode(task, args.episodes, args.seed, 1),
                      "batched": run_mode(task, args.episodes, args.seed, args.batch)}
-    body["comparisons"] = {}
-    for name in CONDITIONS:
-        sequential, batched = body["modes"]["sequential"][name], body["modes"]["batched"][name]
-        pairs = list(zip(sequential["outcomes"], batched["outcomes"], strict=True))
-        differences = [d for d in (clearance_difference(a, b) for a, b in pairs) if d is not None]
-        body["comparisons"][name] = {
-            "batched_over_sequential": round(batched["episodes_per_cpu_s"] / sequential["episodes_per_cpu_s"], 2),
-            "same_outcomes": sum(same_outcome(a, b) for a, b in pairs), "episodes": sequential["episodes"],
-            "largest_clearance_difference_m": max(differences) if differences else None}
-    print(body["comparisons"])
+    body["comparisons"] = compare(body["modes"]["sequential"], body["modes"]["batched"])
+    body["comparisons_also"] = {}
+    for batch in args.also_batch:
+        body["modes"][f"batched_{batch}"] = run_mode(task, args.episodes, args.seed, batch)
+        body["comparisons_also"][str(batch)] = compare(body["modes"]["sequential"], body["modes"][f"batched_{batch}"])
+    print(body["comparisons"], body["comparisons_also"])
     setup = {"task": task, "checkpoint": f"packaged:{task}", "episodes": args.episodes, "seed": args.seed,
-              "batch": args.batch, "chunks": args.chunks, "conditions": CONDITIONS,
+              "batch": args.batch, "also_batch": args.also_batch, "chunks": args.chunks, "conditions": CONDITIONS,
               "clock": "process CPU time (time.process_time, every thread), one torch thread"}
     write_results("bench_eval_speed", args, {**body, "setup": setup}, markdown=markdown)
 

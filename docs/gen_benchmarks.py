@@ -245,19 +245,24 @@ def bench_sim(name: str, data: dict) -> list[str]:
 
 def bench_eval_speed(name: str, data: dict) -> list[str]:
     """Episodes per CPU-second of `evaluate`, sequential and batched, with how many episodes ended the same."""
-    batch = data["config"]["batch"]
+    batches = [(data["config"]["batch"], "batched", data["comparisons"])]  # and the further sizes of the same run
+    batches += [(int(b), f"batched_{b}", c) for b, c in data.get("comparisons_also", {}).items()]
     rows = []
-    for condition, comparison in data["comparisons"].items():
-        sequential, batched = data["modes"]["sequential"][condition], data["modes"]["batched"][condition]
-        largest = comparison["largest_clearance_difference_m"]
-        rows.append([condition, comparison["episodes"], f"{sequential['successes']} / {batched['successes']}",
-                     sequential["episodes_per_cpu_s"], batched["episodes_per_cpu_s"],
-                     f"{comparison['batched_over_sequential']}x", f"{comparison['same_outcomes']}",
-                     "no obstacle" if largest is None else f"{largest:.1e}"])
+    for batch, mode, comparisons in batches:
+        for condition, comparison in comparisons.items():
+            sequential, batched = data["modes"]["sequential"][condition], data["modes"][mode][condition]
+            largest = comparison["largest_clearance_difference_m"]
+            rows.append([condition, batch, comparison["episodes"],
+                         f"{sequential['successes']} / {batched['successes']}",
+                         sequential["episodes_per_cpu_s"], batched["episodes_per_cpu_s"],
+                         f"{comparison['batched_over_sequential']}x", f"{comparison['same_outcomes']}",
+                         "no obstacle" if largest is None else f"{largest:.1e}"])
     sampling, load = data["sampling"], data["load"]
+    sizes = " and ".join(str(batch) for batch, _, _ in batches)
     return [f"`evaluate` of the packaged {data['setup']['task']} policy, process CPU time on one torch thread, "
-            f"sequential and {batch} episodes batched, measured in one run.", "",
-            markdown_table(["condition", "episodes", "successes (sequential / batched)", "sequential eps/CPU-s",
+            f"sequential and {sizes} episodes batched, measured in one run.", "",
+            markdown_table(["condition", "batch", "episodes", "successes (sequential / batched)",
+                            "sequential eps/CPU-s",
                             "batched eps/CPU-s", "ratio", "same outcome (success, steps, contact)",
                             "largest clearance difference (m)"], rows), "",
             f"A DDIM-10 chunk costs {sampling['cpu_ms_per_chunk_alone']} CPU-ms alone and "

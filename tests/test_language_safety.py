@@ -759,6 +759,18 @@ NOT_REFUSED = [
      ("water_plants", ["watering can", "left plant"], ["right plant"])),
     ("we're opening the shop in ten minutes, close the microwave", ("close_microwave", ["microwave"], [])),
     ("open the wine bottle for the party please", ("open_wine_bottle", ["bottle"], [])),
+    # found by the blind table 34: a clause that only says how one of two look-alikes is ("leaks") leaves the
+    # slot to the other; a task verb that is a compound's head ("an ice pack") is no verb; a pronoun keeps
+    # the whole name the noun phrase said; what a person said names no object; "pop the cork" opens
+    ("the green bottle drips, put the yellow bottle in the drawer",
+     ("bottle_in_drawer", ["yellow bottle", "drawer"], ["green bottle"])),
+    ("an ice pack is next to the phone, put the phone on the base",
+     ("phone_on_base", ["phone", "base"], ["ice pack"])),
+    ("open the drawer, there are coffee tins and some paint brushes nearby, keep off them",
+     ("open_drawer", ["drawer"], ["coffee tin", "paint brush"])),
+    ("water the plant, the gardener reckons it needs it", ("water_plants", ["watering can", "plant"], [])),
+    ("we're getting ready for a christening, close the microwave", ("close_microwave", ["microwave"], [])),
+    ("pop the cork on the wine bottle please", ("open_wine_bottle", ["bottle"], [])),
 ]
 
 

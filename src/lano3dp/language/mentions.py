@@ -52,7 +52,8 @@ NOT_OBJECTS = frozenset(
     go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space
     step other others rest help lot bathroom garage studio workshop classroom nursery bedroom hallway basement attic
     cellar lounge pantry cafe bakery shop store supermarket market restaurant canteen cafeteria picnic party
-    meeting breakfast brunch lunch dinner supper""".split()  # rooms, shops and events name where and when ("in the
+    meeting breakfast brunch lunch dinner supper wedding funeral birthday anniversary ceremony concert festival
+    christening graduation celebration holiday""".split()  # rooms, shops and events name where and when ("in the
     # garage: open the drawer", "we're closing the bakery soon", "for the picnic"); "thanks a lot"
 ) - {"obstacle?"}
 # Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.
@@ -349,10 +350,12 @@ def object_mentions(
             continue
         if not length and tuple(words[i - 2 : i]) in _EXISTENTIAL and word not in verbs:
             run_end = _noun_run(words, i, known, verbs)
-            if run_end > i and _plural_noun(words[run_end - 1]) and not any(
-                _known_at(words, k, known) for k in range(i, run_end)
-            ):  # a known word in it is read where it stands ("there are sharp knives")
-                length = run_end - i  # "there are paintbrushes", "there are playing cards": objects, known or not
+            head = words[run_end - 1] if run_end > i else ""
+            plural = _plural_noun(head) or (singular(head) != head and _known_at(words, run_end - 1, known))
+            if run_end > i and plural and not any(
+                _known_at(words, k, known) for k in range(i, run_end - 1)
+            ):  # a known word before the head is read where it stands ("there are sharp knives")
+                length = run_end - i  # "there are paintbrushes", "there are coffee tins": objects, known or not
         ambiguous = word in _AMBIGUOUS_BARE and not _bare_plural_noun(words, i) and not _bare_noun_said(words, i) and (
             i + 1 >= len(words) or not (_plural_noun(words[i + 1]) and words[i + 1] not in _BOUNDARY)
         )  # "remote controls", "tape measures": the first word of a compound before its plural head
@@ -647,9 +650,11 @@ def named_in_passing(name: str, words: Sequence[str], start: int, end: int) -> b
 
 def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
     """ "my son made a mess", "my roommate has left it open": a person who did something is named in passing."""
+    following = words[end : end + 2]
+    if following[:1] in _REPORTING and following[1:2] in _REPORTED:
+        return True  # "the florist said it's thirsty", "the vet told us to ...": only a person reports
     if mention.head not in PEOPLE and singular(mention.head) not in PEOPLE:
         return False
-    following = words[end : end + 2]
     if following[:1] in (["are"], ["is"], ["'re"]) and following[1:] and following[1] in _ON_THEIR_WAY:
         return True  # "my parents are coming over for dinner": not here now
     if following[:1] in (["has"], ["had"], ["have"]):
@@ -666,6 +671,9 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
 
 
 _ON_THEIR_WAY = frozenset("coming visiting arriving calling expecting".split())
+_REPORTING = [[w] for w in "said says told tells reckons reckoned thinks thought mentioned suggested asked".split()]
+# What follows a reporting verb when it reports ("the label says fragile" is an object's print, not a person).
+_REPORTED = [[w] for w in "it it's its that to we i you they he she us me the this these those so".split()]
 _BEFORE_A_MODAL = [[w] for w in "can can't cannot must mustn't should shouldn't is are won't will may".split()]
 _SENTENCE_ENDS = [[], ["."], [";"], ["!"]]
 _ROOMS = frozenset("""kitchen bathroom office garden lab house room garage studio workshop classroom nursery bedroom

@@ -557,6 +557,10 @@ class OfflineDecomposer:
             existential = task[k] == "theres" if k >= 0 else False
             existential = existential or (k >= 1 and task[k] in _COPULAS and task[k - 1] == "there")
             noun.declared = existential or (noun.end < len(task) and task[noun.end] in _COPULAS)
+            # "the red watering can leaks, use the blue one": a clause that only says how a thing is
+            said_how = noun.end < len(task) and task[noun.end] in SUBJECT_VERBS
+            noun.declared = noun.declared or (said_how and (task[noun.end + 1 : noun.end + 2] or ["."])[0] in (
+                _CLAUSE_CLOSE))
             if k >= 0 and task[k] in ("and", "or") and previous_noun is not None and previous_noun.landmark:
                 noun.landmark = True  # "past the mug and the jar": both are landmarks
             if not noun.declared and (_in_existential_list(task, noun.index, verb_positions) or _in_subject_list(
@@ -1322,6 +1326,11 @@ class OfflineDecomposer:
                 following not in DETERMINERS
             ):
                 continue  # "put the spark plug in the drawer": after the task's verb, a noun's second word
+            if after_noun and i >= 2 and task[i - 2] in DETERMINERS and "NOUN" in word_classes(word) and (
+                singular(previous) == previous) and (
+                following in _COPULAS or following in _LOCATIVES or following in _CLAUSE_CLOSE
+            ):  # (after a plural it is the subject's verb: "doesn't matter if the pens move")
+                continue  # "a blister pack near the drawer", "the ice pack is cold": a compound's head noun
             k = i - 1
             while k > 0 and (task[k].endswith("ly") or task[k] in _STATE_ADVERBS):
                 k -= 1
@@ -1763,11 +1772,21 @@ class OfflineDecomposer:
                 parse.warnings.append(
                     f"'{reference.text}' may mean {' or '.join(n.ref().phrase for n in others)}; avoiding all of them"
                 )
+            avoided = [(noun.end - 1, _fuller_name(noun.ref(), noun.end - 1, parse.mentions)) for noun in chosen]
+            if reference.kind == "them":
+                # "there are coffee tins and some paint brushes nearby, keep off them": every object of the
+                # sentence before it, also those only the mention reader finds (no determiner, a word no rule knows)
+                sentence = _running_count(parse.tokens, _SENTENCE_END)
+                avoided += [(m.index, m.ref()) for m in parse.mentions if m.index < reference.index and (
+                    sentence[m.index] == sentence[reference.index]) and not m.permitted and not any(
+                    n.index <= m.index < n.end for n in chosen) and not any(
+                    m.name in (t.name, t.ref().name) or _short_for(m, t.ref()) for t in targets)
+                    and m.ref() not in parse.obstacles]
             for noun in chosen:
                 if noun in parse.nouns:
                     parse.nouns.remove(noun)
-                parse.obstacles.append(noun.ref())
                 avoided_at.append(noun.index)
+            parse.obstacles.extend(ref for _, ref in sorted(avoided, key=lambda a: a[0]))
 
     @staticmethod
     def _other_one(skill, reference, before, others, targets, parse) -> list[_Noun]:
@@ -1854,6 +1873,15 @@ def _short_for(said: Mention | ObjectRef, target: ObjectRef) -> bool:
     words, theirs = said.name.split(), target.name.split()
     return set(words) < set(theirs) and words[-1] == theirs[-1] and all(
         getattr(said, a) in (None, getattr(target, a)) for a in ("color", "size", "position"))
+
+
+def _fuller_name(ref: ObjectRef, head: int, mentions: Sequence[Mention]) -> ObjectRef:
+    """`ref` named as the mention reader names the noun phrase whose head is at `head`, where that name ends with
+    `ref`'s and is longer ("there are flower pots about, don't touch them": the flower pots, not any pot)."""
+    mention = next((m for m in mentions if m.index == head), None)
+    if mention is None or not mention.name.endswith(" " + ref.name):
+        return ref
+    return ObjectRef(name=mention.name, color=ref.color, size=ref.size, position=ref.position)
 
 
 def _is_care(cue: str) -> bool:

@@ -188,6 +188,8 @@ def everyday_verbs(words: Sequence[str], lexicon: Iterable[str]) -> tuple[list[s
         if reading is None or previous not in _CLAUSE_STARTS or reading[0] not in lexicon:
             continue
         verb, particles = reading
+        if word == "pop" and "cork" in words[i + 1 : i + 3]:
+            continue  # "pop the cork on the bottle" opens it: the idiom, not a placing
         if not particles:
             out[i] = verb
             corrections.append(Correction(i, word, verb))

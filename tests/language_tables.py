@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import re
+import unicodedata
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -72,7 +73,9 @@ def _words(ref: dict, slot=None) -> frozenset:
     name = ref["name"]
     if slot is not None and (name in slot.synonyms or singular(name) in slot.synonyms):
         name = slot.word  # the convention: a registered synonym is its slot's word, on both sides
-    # a hyphen breaks words as a space does ("yo-yo" is read as "yo yo", as scene names are)
+    # a hyphen breaks words as a space does ("yo-yo" is read as "yo yo", as scene names are); accents are dropped
+    # as the normaliser drops them ("pinata" for "pi\u00f1ata")
+    name = "".join(c for c in unicodedata.normalize("NFKD", name) if not unicodedata.combining(c))
     words = name.replace("-", " ").split()
     while len(words) > 1 and words[0] in MATERIALS:
         words.pop(0)

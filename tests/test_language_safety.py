@@ -475,6 +475,7 @@ REFUSALS = [
     # found by the blind table 31: the task asked again on another object, with no verb of its own
     (SeveralTasksError, "put the red block in the drawer and then the blue one", "asks for the task again"),
     (SeveralTasksError, "pour the bowl into the pan, then the green one too", "asks for the task again"),
+    (SeveralTasksError, "put the bottle in the drawer and once you're done close the microwave", "two tasks"),
     (UnknownVerbError, "i don't want the phone on the charger", "no skill fits"),
     (NegatedCommandError, "Please don't move the block into the drawer", "'don't move the block into the drawer'"),
     (SeveralTasksError, "Open the drawer and put the block in it",
@@ -771,6 +772,17 @@ NOT_REFUSED = [
     ("water the plant, the gardener reckons it needs it", ("water_plants", ["watering can", "plant"], [])),
     ("we're getting ready for a christening, close the microwave", ("close_microwave", ["microwave"], [])),
     ("pop the cork on the wine bottle please", ("open_wine_bottle", ["bottle"], [])),
+    # found by the blind table 35: a plural the lexicon lacks is still a plural ("bookends"), and "all of them"
+    # after a semicolon takes the list before it; people doing something and outdoor places name no object; a
+    # can after the words naming its kind; "thats on the right" says where; "lenses" is more than one lens
+    ("There are cufflinks and a lamp by the drawer; keep clear of all of them. Open the drawer.",
+     ("open_drawer", ["drawer"], ["cufflink", "lamp"])),
+    ("close the microwave, the visitors leave at six", ("close_microwave", ["microwave"], [])),
+    ("water the plant, we're going to the beach later", ("water_plants", ["watering can", "plant"], [])),
+    ("put the soda can in the drawer", ("put_item_in_drawer", ["soda can", "drawer"], [])),
+    ("open the bottle thats on the right", ("open_wine_bottle", ["right bottle"], [])),
+    ("mind the two lenses, then open the drawer", ("open_drawer", ["drawer"], ["lens"])),
+    ("open the bottle, the synth stand is wobbly", ("open_wine_bottle", ["bottle"], ["synth stand"])),
 ]
 
 

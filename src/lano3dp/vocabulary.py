@@ -73,6 +73,8 @@ def singular(word: str) -> str:
     lemmas = _noun_lemmas(word) if word.isalpha() else ()
     if not lemmas:
         return by_rule
+    if by_rule.endswith("se") and by_rule[:-1] in lemmas:
+        by_rule = by_rule[:-1]  # "lenses" -> "lens": the lexicon also lists a "lense"
     return next((w for w in lemmas if w in OBJECT_NOUNS), by_rule if by_rule in lemmas else lemmas[0])
 
 

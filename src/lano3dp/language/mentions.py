@@ -53,7 +53,8 @@ NOT_OBJECTS = frozenset(
     step other others rest help lot bathroom garage studio workshop classroom nursery bedroom hallway basement attic
     cellar lounge pantry cafe bakery shop store supermarket market restaurant canteen cafeteria picnic party
     meeting breakfast brunch lunch dinner supper wedding funeral birthday anniversary ceremony concert festival
-    christening graduation celebration holiday""".split()  # rooms, shops and events name where and when ("in the
+    christening graduation celebration holiday shoot lake beach park airport station school church gym river sea
+    city town village""".split()  # rooms, shops and events name where and when ("in the
     # garage: open the drawer", "we're closing the bakery soon", "for the picnic"); "thanks a lot"
 ) - {"obstacle?"}
 # Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.
@@ -351,7 +352,8 @@ def object_mentions(
         if not length and tuple(words[i - 2 : i]) in _EXISTENTIAL and word not in verbs:
             run_end = _noun_run(words, i, known, verbs)
             head = words[run_end - 1] if run_end > i else ""
-            plural = _plural_noun(head) or (singular(head) != head and _known_at(words, run_end - 1, known))
+            plural = _plural_noun(head) or _unlisted_plural(head) or (
+                singular(head) != head and _known_at(words, run_end - 1, known))  # "there are tins"
             if run_end > i and plural and not any(
                 _known_at(words, k, known) for k in range(i, run_end - 1)
             ):  # a known word before the head is read where it stands ("there are sharp knives")
@@ -387,6 +389,11 @@ def _plural_noun(word: str) -> bool:
     return singular(word) != word and "NOUN" in word_classes(singular(word))
 
 
+def _unlisted_plural(word: str) -> bool:
+    """A plural of a noun the lexicon lacks ("bookends", "crucibles"): nouns are open-ended, verbs are not."""
+    return word.isalpha() and singular(word) != word and not word_classes(word) and not word_classes(singular(word))
+
+
 def _coordinated_noun(words: Sequence[str], i: int, known_length: int, verbs: set[str]) -> bool:
     """ "the batteries and tape measures", "dolls, teddy bears and toy cars": a noun joined to the noun phrase just
     before it, without a determiner of its own. Not a verb of a second clause ("and mind the lamp", "and watch
@@ -408,7 +415,7 @@ def _coordinated_noun(words: Sequence[str], i: int, known_length: int, verbs: se
     ):
         return False  # "and watch out for the lamp", "and mind the mug": a verb with its object or particle
     classes = word_classes(word)
-    if known_length or _plural_noun(word):
+    if known_length or _plural_noun(word) or _unlisted_plural(word):
         return True  # a known object word, or a plural noun
     if following.isalpha() and following not in _BOUNDARY and (following in OBJECT_NOUNS or _plural_noun(following)):
         return True  # "salt shakers": a compound with an object noun after it
@@ -570,8 +577,9 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             # "stand" is also a verb (not after a plural: "the cups stand on the left")
             end += 1
             continue
-        if end > j and singular(words[end - 1]) in PEOPLE and (_third_person_verb(word) or past_verb_form(word)):
-            break  # "before my mum visits", "my son spent all morning": a person's verb, not a "mum visit"
+        if end > j and singular(words[end - 1]) in PEOPLE and (_third_person_verb(word) or past_verb_form(word) or (
+                singular(words[end - 1]) != words[end - 1] and "VERB" in word_classes(word))):
+            break  # "before my mum visits", "my son spent all morning", "the visitors leave at six": a person's verb
         if word in ("half", "partly", "almost") and end > j and words[end + 1 : end + 2] and (
             past_verb_form(words[end + 1]) or words[end + 1] in ("done", "full", "empty", "open", "built")
         ):
@@ -659,6 +667,10 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
         return True  # "my parents are coming over for dinner": not here now
     if following[:1] in (["has"], ["had"], ["have"]):
         following = following[1:]
+    plural = end > 0 and singular(words[end - 1]) != words[end - 1]  # (a mention's name is singular)
+    if plural and following and following[0].isalpha() and following[0] not in _BOUNDARY and "VERB" in word_classes(
+        following[0]):
+        return True  # "the guests arrive at eight", "my kids play there": people doing something
     if following and following[0] not in _BOUNDARY and _third_person_verb(following[0]):
         return True  # "before my mum visits", "my son leaves it lying around": a person doing something
     if len(following) == 2 and following[1] in ("you", "it", "them", "me", "us") and following[0].isalpha() and (
@@ -714,8 +726,8 @@ _PLACE_PREPOSITIONS = frozenset("on in at by near beside behind under over next 
 def modal_can(words: Sequence[str], i: int) -> bool:
     """ "can" at `i` is the modal verb ("the mug can be moved", "can both be touched"), not "the tin can"."""
     following = words[i + 1] if i + 1 < len(words) else "."
-    if following in _PLACE_PREPOSITIONS:
-        return False  # "the paint can on the right", "the can by the sink": where the can stands
+    if following in _PLACE_PREPOSITIONS or following == "can":
+        return False  # "the paint can on the right", "the can by the sink", "the jerry can can tip": a can
     if following in ("be", "you", "i", "we", "not", "now", "both", "all", "also", "still", "safely", "easily", "stay",
                      "go", "move", "get", "remain", "fall", "break", "tip", "stand", "sit", "touch"):
         return True

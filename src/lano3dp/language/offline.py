@@ -155,6 +155,7 @@ _PRONOUNS = {
 }  # fmt: skip
 _LIST_SEPARATORS = frozenset({"and", "or", ",", "nor", "plus"})
 _CLAUSE_ENDS = frozenset({"then", "while", "but", "before", "after", "when", "so", "once", "until", "because"})
+_DONE = frozenset("done finished over through complete completed ready".split())
 _POLITE = frozenset(
     "please could would can will you robot okay ok now i need want to like kindly go ahead hey hi hello um uh yo"
     .split()
@@ -509,6 +510,9 @@ class OfflineDecomposer:
             "ing") else "touch", text, flags=re.IGNORECASE)  # an idiom of touching
         text = re.sub(r"\s*(?:->|=>|-->|→)\s*", " into ", text)  # "block -> drawer": shorthand for "into"
         text = re.sub(r"\bon (?:its|their) feet\b", "upright", text, flags=re.IGNORECASE)  # "back on its feet"
+        # "the bottle that's / thats on the left": a relative clause saying where, as "that is" says it
+        text = re.sub(r"\b(that|which)(?:'s|s) (?=(?:on|in|at|by|near|next|behind|beside|under|closest|nearest)\b)",
+                      r"\1 is ", text, flags=re.IGNORECASE)
         tokens = tokenize(text)
         words = [_CHAT_WORDS.get(w, w) for w in _without_disfluencies(tokens)]
         scene_kinds = [" ".join(o.kind) for o in scene_vocabulary(scene_objects)] if scene_objects else []
@@ -809,7 +813,9 @@ class OfflineDecomposer:
                 tokens[k] in _CLAUSE_OPENERS or tuple(tokens[k - 1 : k + 1]) in _SEQUENCE_OPENERS
             ):
                 k -= 2 if tuple(tokens[k - 1 : k + 1]) in _SEQUENCE_OPENERS else 1
-            if k >= 0 and tokens[k] not in _TASK_BREAKS and tokens[k] not in _POLITE and not (
+            # "once that's done open ...", "when you're finished close ...": a clause of time ends before the verb
+            after_done = k >= 0 and tokens[k] in _DONE and bool(_CLAUSE_ENDS & set(tokens[max(0, k - 5) : k]))
+            if k >= 0 and tokens[k] not in _TASK_BREAKS and tokens[k] not in _POLITE and not after_done and not (
                 _after_wanted_object(tokens, position)
             ):
                 continue  # not a clause's verb ("the drawer is open", "a glass of water")
@@ -1326,7 +1332,8 @@ class OfflineDecomposer:
                 following not in DETERMINERS
             ):
                 continue  # "put the spark plug in the drawer": after the task's verb, a noun's second word
-            if after_noun and i >= 2 and task[i - 2] in DETERMINERS and "NOUN" in word_classes(word) and (
+            unlisted = previous.isalpha() and not word_classes(previous) and previous not in _POLITE  # "mic"
+            if (after_noun or unlisted) and i >= 2 and task[i - 2] in DETERMINERS and "NOUN" in word_classes(word) and (
                 singular(previous) == previous) and (
                 following in _COPULAS or following in _LOCATIVES or following in _CLAUSE_CLOSE
             ):  # (after a plural it is the subject's verb: "doesn't matter if the pens move")
@@ -1390,6 +1397,8 @@ class OfflineDecomposer:
                 i += 1
                 continue
             end = i + len(match.split())
+            if task[end : end + 1] == ["can"] and not match.endswith("can") and not modal_can(task, end):
+                match, end = f"{match} can", end + 1  # "the tin can": a can, whatever the word before it names
             if self._modifies_next_noun(task, end, verb_positions):
                 i += 1  # "the toy car" is a car: read below as a noun of its own, never as the slot's "toy"
                 continue
@@ -1416,6 +1425,8 @@ class OfflineDecomposer:
             for j in range(i + 1, len(task)):
                 # "a can", "the can": a function word straight after an article is the noun
                 noun_after_article = j == i + 1 and word in ("a", "an", "the") and task[j] == "can"
+                # "the soda can", "the jerry can can tip over": a can after the words naming its kind
+                noun_after_article = noun_after_article or task[j] == "can" and bool(chunk) and not modal_can(task, j)
                 if task[j] in _SENTENCE_END or task[j] == "," or j in verb_positions:
                     break
                 if task[j] in _BOUNDARY and not noun_after_article:
@@ -1776,7 +1787,7 @@ class OfflineDecomposer:
             if reference.kind == "them":
                 # "there are coffee tins and some paint brushes nearby, keep off them": every object of the
                 # sentence before it, also those only the mention reader finds (no determiner, a word no rule knows)
-                sentence = _running_count(parse.tokens, _SENTENCE_END)
+                sentence = _running_count(parse.tokens, frozenset(".!?"))  # "there are X and Y; avoid them"
                 avoided += [(m.index, m.ref()) for m in parse.mentions if m.index < reference.index and (
                     sentence[m.index] == sentence[reference.index]) and not m.permitted and not any(
                     n.index <= m.index < n.end for n in chosen) and not any(
@@ -1876,10 +1887,12 @@ def _short_for(said: Mention | ObjectRef, target: ObjectRef) -> bool:
 
 
 def _fuller_name(ref: ObjectRef, head: int, mentions: Sequence[Mention]) -> ObjectRef:
-    """`ref` named as the mention reader names the noun phrase whose head is at `head`, where that name ends with
-    `ref`'s and is longer ("there are flower pots about, don't touch them": the flower pots, not any pot)."""
-    mention = next((m for m in mentions if m.index == head), None)
-    if mention is None or not mention.name.endswith(" " + ref.name):
+    """`ref` named as the mention reader names the noun phrase whose head is at `head` (or the word after it), where
+    that name holds `ref`'s and is longer ("there are flower pots about, don't touch them": the flower pots, not any
+    pot; "the jerry can can tip over, go around it": the jerry can)."""
+    mention = next((m for m in mentions if m.index == head), None) or next(
+        (m for m in mentions if m.index == head + 1 and m.name.startswith(ref.name + " ")), None)
+    if mention is None or not (mention.name.endswith(" " + ref.name) or mention.name.startswith(ref.name + " ")):
         return ref
     return ObjectRef(name=mention.name, color=ref.color, size=ref.size, position=ref.position)
 

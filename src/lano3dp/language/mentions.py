@@ -54,8 +54,9 @@ NOT_OBJECTS = frozenset(
     cellar lounge pantry cafe bakery shop store supermarket market restaurant canteen cafeteria picnic party
     meeting breakfast brunch lunch dinner supper wedding funeral birthday anniversary ceremony concert festival
     christening graduation celebration holiday shoot lake beach park airport station school church gym river sea
-    city town village""".split()  # rooms, shops and events name where and when ("in the
-    # garage: open the drawer", "we're closing the bakery soon", "for the picnic"); "thanks a lot"
+    city town village""".split()  # rooms, shops, places and events name where and when ("in the
+    # garage: open the drawer", "we're closing the bakery soon", "for the picnic", "we leave for the lake");
+    # "thanks a lot"
 ) - {"obstacle?"}
 # Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.
 UNITS = frozenset(

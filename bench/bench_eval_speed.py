@@ -185,7 +185,10 @@ def markdown(record: dict[str, Any]) -> str:
                          f"{comparison['same_outcomes']} of {sequential['episodes']}",
                          "no obstacle" if largest is None else f"{largest:.1e}"])
     sampling = record["sampling"]
-    return ("# Evaluation speed: sequential and batched\n\n## Episodes per CPU-second\n\n"
+    machine = (record.get("provenance") or {}).get("machine") or {}
+    on = f"Measured on {machine['processor']}, {machine.get('cpu_count')} cores, one torch thread.\n\n" if (
+        machine.get("processor")) else ""
+    return ("# Evaluation speed: sequential and batched\n\n## Episodes per CPU-second\n\n" + on
             + markdown_table(["condition", "batch", "episodes", "sequential", "batched",
                               "ratio", "same outcome (success, steps, contact)",
                               "largest clearance difference (m)"], rows)

@@ -259,8 +259,12 @@ def bench_eval_speed(name: str, data: dict) -> list[str]:
                          "no obstacle" if largest is None else f"{largest:.1e}"])
     sampling, load = data["sampling"], data["load"]
     sizes = " and ".join(str(batch) for batch, _, _ in batches)
+    machine = made_by(data).get("machine") or {}
+    on = f" on {machine['processor']} ({machine.get('cpu_count')} cores)" if machine.get("processor") else ""
     return [f"`evaluate` of the packaged {data['setup']['task']} policy, process CPU time on one torch thread, "
-            f"sequential and {sizes} episodes batched, measured in one run.", "",
+            f"sequential and {sizes} episodes batched, measured in one run{on}. The ratio depends on the CPU: "
+            "batched sampling is what a batch saves, and its kernels' speed differs from one processor to another.",
+            "",
             markdown_table(["condition", "batch", "episodes", "successes (sequential / batched)",
                             "sequential eps/CPU-s",
                             "batched eps/CPU-s", "ratio", "same outcome (success, steps, contact)",

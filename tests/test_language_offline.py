@@ -84,7 +84,7 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_32.json", 170, 48, 170),  # first run 165/170 (score_blind.py), 167/170 (convention)
     ("instructions_blind_33.json", 179, 48, 176),  # first run 167/179 (score_blind.py), 171/179 (convention)
     ("instructions_blind_34.json", 179, 48, 178),  # first run 169/179 (score_blind.py), 172/179 (convention)
-    ("instructions_blind_35.json", 180, 48, 169),  # first run 157/180 (score_blind.py), 162/180 (convention)
+    ("instructions_blind_35.json", 180, 48, 170),  # first run 157/180 (score_blind.py), 162/180 (convention)
     ("instructions_blind_27.json", 153, 46, 149),  # first run 144/153 (score_blind.py), 148/153 (convention)
 ])  # fmt: skip
 def test_later_blind_tables_keep_their_rates_and_stay_safe(table, rows, refusals, exact):

@@ -1211,13 +1211,25 @@ class OfflineDecomposer:
             if word == "can" and (nouns or after_modifier) and following not in ("be", "you", "i", "we", "not", "now"):
                 nouns.append(word)  # "the tin can", "the soda can", "the left can": a noun after a noun or a modifier
                 continue
-            if word in _COMPOUND_MODIFIERS and not nouns and following.isalpha() and following not in (
-                _BOUNDARY | _NON_OBJECTS
+            if word in _COMPOUND_MODIFIERS and not nouns and following.isalpha() and following not in _BOUNDARY and (
+                following not in _NON_OBJECTS or following in UNITS and len(following) > 3
             ):
-                nouns.append(word)  # "the water bottle", "the table lamp"
+                nouns.append(word)  # "the water bottle", "the table lamp", "the water meter"
                 continue
+            last = k + 1 == len(chunk) or not following.isalpha()  # the phrase's last word
             if word == "stand" and nouns and singular(nouns[-1]) == nouns[-1]:
                 nouns.append(word)  # "the soldering iron stand": a holder after a singular noun
+                continue
+            if nouns and chunk[k - 1] == nouns[-1] and (last or following in _BOUNDARY) and (
+                word in UNITS and len(word) > 3 or word in POSITION_WORDS and nouns[-1].endswith("ing")
+            ):
+                nouns.append(word)  # "the light meter", "a spinning top": the head of a compound, no unit or side
+                continue
+            after = chunk[k + 2] if k + 2 < len(chunk) else ","
+            if nouns and word.endswith("ing") and following.isalpha() and following not in _BOUNDARY and (
+                "NOUN" in word_classes(following) and (after in _BOUNDARY or not after.isalpha())
+            ):
+                nouns.append(word)  # "the lens cleaning kit": a gerund naming the kind of the noun after it
                 continue
             if nouns and word in ("table", "counter", "door", "side") and following.isalpha() and (
                 following not in _BOUNDARY | _NON_OBJECTS

@@ -60,7 +60,7 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_7.json", 120, 38, 117),  # first run 98/120 (both scorers)
     ("instructions_blind_8.json", 120, 41, 114),  # first run 79/120 (score_blind.py), 82/120 (convention)
     ("instructions_blind_9.json", 120, 38, 108),  # first run 75/120 (score_blind.py), 77/120 (convention)
-    ("instructions_blind_10.json", 120, 38, 119),  # first run 113/120 (score_blind.py), 115/120 (convention)
+    ("instructions_blind_10.json", 120, 38, 120),  # first run 113/120 (score_blind.py), 115/120 (convention)
     ("instructions_blind_11.json", 143, 43, 143),  # first run 132/143 (score_blind.py), 137/143 (convention)
     ("instructions_blind_12.json", 149, 45, 148),  # first run 133/149 (score_blind.py), 140/149 (convention)
     ("instructions_blind_13.json", 146, 42, 146),  # first run 133/146 (score_blind.py), 134/146 (convention)
@@ -84,7 +84,8 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_32.json", 170, 48, 170),  # first run 165/170 (score_blind.py), 167/170 (convention)
     ("instructions_blind_33.json", 179, 48, 176),  # first run 167/179 (score_blind.py), 171/179 (convention)
     ("instructions_blind_34.json", 179, 48, 178),  # first run 169/179 (score_blind.py), 172/179 (convention)
-    ("instructions_blind_35.json", 180, 48, 170),  # first run 157/180 (score_blind.py), 162/180 (convention)
+    ("instructions_blind_35.json", 180, 48, 171),  # first run 157/180 (score_blind.py), 162/180 (convention)
+    ("instructions_blind_36.json", 180, 49, 166),  # first run 153/180 (score_blind.py), 159/180 (convention)
     ("instructions_blind_27.json", 153, 46, 149),  # first run 144/153 (score_blind.py), 148/153 (convention)
 ])  # fmt: skip
 def test_later_blind_tables_keep_their_rates_and_stay_safe(table, rows, refusals, exact):
@@ -103,6 +104,8 @@ CONTESTED = {
     "instructions_blind_27.json": {"put the phone on the base, not the black one"},
     # a shelf that objects stand on is a surface like the table, never avoided; the author avoided it
     "instructions_blind_35.json": {"mind the elves on the shelf and the five lenses, then put the phone on the dock"},
+    # "dice" is kept as said, the word most people use for one die too; the author wrote its singular "die"
+    "instructions_blind_36.json": {"pour the bowl into the pan, avoid the two red dice and the three blue dice"},
 }
 
 

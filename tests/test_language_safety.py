@@ -789,6 +789,16 @@ NOT_REFUSED = [
     ("open the drawer without bumping the water meter", ("open_drawer", ["drawer"], ["water meter"])),
     ("close the microwave but mind the spinning top", ("close_microwave", ["microwave"], ["spinning top"])),
     ("open the drawer, avoid the shoe cleaning kit", ("open_drawer", ["drawer"], ["shoe cleaning kit"])),
+    # found by the blind table 36: what hangs, sits or lies somewhere is said to be there, not carried; "the X can
+    # can tip" is a can and its modal; a unit with no number names a kind ("the pint glass"); a measure in digits
+    # names nothing; "keep away from it and open ..." is two clauses, not "keep ... open"; company and slopes
+    ("A lamp hangs above the drawer. Put the stapler in the drawer.",
+     ("put_item_in_drawer", ["stapler", "drawer"], ["lamp"])),
+    ("the gas can can tip over, keep away from it and open the drawer", ("open_drawer", ["drawer"], ["gas can"])),
+    ("open the drawer, avoid the pint glass", ("open_drawer", ["drawer"], ["pint glass"])),
+    ("open the drawer, mind the 2 litre jug", ("open_drawer", ["drawer"], ["jug"])),
+    ("water the plant, we're off to the slopes later", ("water_plants", ["watering can", "plant"], [])),
+    ("put the phone on the base, I'm going out with my brother", ("phone_on_base", ["phone", "base"], [])),
 ]
 
 

@@ -54,7 +54,7 @@ NOT_OBJECTS = frozenset(
     cellar lounge pantry cafe bakery shop store supermarket market restaurant canteen cafeteria picnic party
     meeting breakfast brunch lunch dinner supper wedding funeral birthday anniversary ceremony concert festival
     christening graduation celebration holiday shoot lake beach park airport station school church gym river sea
-    city town village""".split()  # rooms, shops, places and events name where and when ("in the
+    city town village slope slopes till""".split()  # rooms, shops, places and events name where and when ("in the
     # garage: open the drawer", "we're closing the bakery soon", "for the picnic", "we leave for the lake");
     # "thanks a lot"
 ) - {"obstacle?"}
@@ -332,6 +332,10 @@ def object_mentions(
                 found = None  # "I need to find my passport", "I'm looking for my keys": not there to be avoided
             if found is not None and _person_who_did(found, words, end):
                 found = None  # "my son made a mess": who did something earlier is no object on the table
+            if found is not None and i and words[i - 1] == "with" and singular(found.head) in PEOPLE and (
+                words[i] in ("my", "our", "his", "her", "their", "your")
+            ):
+                found = None  # "I'm heading out with my cousin": company, not a thing on the table
             if found is not None and not _possessor(words, j, end, known, verbs):
                 mentions.append(found)
                 last_end = end
@@ -388,6 +392,14 @@ _EXISTENTIAL = frozenset({("there", "are"), ("there", "'re"), ("there", "were")}
 
 def _plural_noun(word: str) -> bool:
     return singular(word) != word and "NOUN" in word_classes(singular(word))
+
+
+def _after_number(words: Sequence[str], j: int, chunk: Sequence[str], said: Sequence[str]) -> bool:
+    """Whether the unit word leading `chunk` (what is left of the phrase `said`, which starts at `j`) follows a
+    number word: "the two litre jug" measures; "the pint glass", "the foot pump" name a kind (a measure in digits
+    is gone before the words are read)."""
+    k = j + len(said) - len(chunk) - 1  # the word before the chunk's first word
+    return k >= 0 and (words[k].isdigit() or words[k] in NUMBER_WORDS)
 
 
 def _unlisted_plural(word: str) -> bool:
@@ -645,7 +657,8 @@ PEOPLE = frozenset(
     flatmate housemate neighbour neighbor friend boss colleague grandma grandpa grandmother grandfather aunt uncle
     cousin baby toddler guest visitor cleaner nanny teacher someone somebody everyone nobody parent grandparent
     family nana nan nanna granny gran grandad granddad grampa nephew niece boyfriend girlfriend fiance fiancee
-    sibling cat dog puppy kitten pet""".split()
+    sibling cat dog puppy kitten pet farmer florist gardener vet doctor nurse plumber electrician builder courier
+    driver postman landlord landlady customer client patient""".split()
 )  # pets too: "the cat knocked it over"
 
 
@@ -727,6 +740,8 @@ _PLACE_PREPOSITIONS = frozenset("on in at by near beside behind under over next 
 def modal_can(words: Sequence[str], i: int) -> bool:
     """ "can" at `i` is the modal verb ("the mug can be moved", "can both be touched"), not "the tin can"."""
     following = words[i + 1] if i + 1 < len(words) else "."
+    if i and words[i - 1] == "can":
+        return True  # the second of "the petrol can can leak"
     if following in _PLACE_PREPOSITIONS or following == "can":
         return False  # "the paint can on the right", "the can by the sink", "the jerry can can tip": a can
     if following in ("be", "you", "i", "we", "not", "now", "both", "all", "also", "still", "safely", "easily", "stay",
@@ -762,7 +777,9 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
             break  # "the pan lid": a lid comes off, so it is an object of its own
         chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
     while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
-        chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends or chunk[0] in UNITS | NUMBER_WORDS
+        chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends and not (
+            chunk[0] in UNITS and not _after_number(words, j, chunk, words[j:end])) or chunk[0] in NUMBER_WORDS
+        or chunk[0] in UNITS and _after_number(words, j, chunk, words[j:end])
         or is_adjective(chunk[0]) and (chunk[0] not in OBJECT_NOUNS or chunk[0] in MATERIALS)
         or chunk[0] in PROPERTY_WORDS  # "the sharp knives", though "sharp" is a noun too
     ):  # not "the paper shredder": a thing's name before a noun names its kind

@@ -169,6 +169,10 @@ _COPULAS = frozenset("is are 's 're 'm was were be been being sits sit stands st
 _PLURAL_COPULAS = frozenset("are 're were sit stand lie".split())
 _WARNINGS = frozenset("careful caution warning attention heads".split())
 _STANCE = frozenset("sitting standing lying placed located resting positioned kept".split())
+_MEASURE = re.compile(r"\b\d+(?:[.,]\d+)?\s*(?:" + "|".join(sorted(map(re.escape, UNITS), key=len, reverse=True))
+                      + r")\b", re.IGNORECASE)
+_STANCE_VERBS = frozenset("hang hangs sit sits lie lies rest rests lean leans".split())
+_STANCE_PLACES = frozenset("over above on in near next beside behind under below by from against across".split())
 # Words before a noun that make it a landmark ("the drawer under the microwave"), not a task object.
 _LOCATIVES = frozenset("next near beside behind under below beneath above by besides opposite of close past".split())
 # After "right", these make it an adverb of place or time, not the verb of bottle_upright.
@@ -506,6 +510,9 @@ class OfflineDecomposer:
         """
         normalized = normalize_instruction(instruction)
         text = _COUNT_MARK.sub(" ", normalized.text)  # "1x block", "mug x2": a count, not an "x block"
+        # "the 2 litre jug", "8 cm to the right": a measure says how much, never what (the tokens drop its digits,
+        # and a unit left alone names a kind: "the pint glass", "the foot pump")
+        text = _MEASURE.sub(" ", text)
         text = re.sub(r"\b(lay|laying|lays|put|putting) a finger on\b", lambda m: "touching" if m.group(1).endswith(
             "ing") else "touch", text, flags=re.IGNORECASE)  # an idiom of touching
         text = re.sub(r"\s*(?:->|=>|-->|→)\s*", " into ", text)  # "block -> drawer": shorthand for "into"
@@ -560,7 +567,7 @@ class OfflineDecomposer:
             noun.source = k >= 0 and (task[k] in ("from", "off") or (task[k] == "of" and task[k - 1 : k] == ["out"]))
             existential = task[k] == "theres" if k >= 0 else False
             existential = existential or (k >= 1 and task[k] in _COPULAS and task[k - 1] == "there")
-            noun.declared = existential or (noun.end < len(task) and task[noun.end] in _COPULAS)
+            noun.declared = existential or (noun.end < len(task) and task[noun.end] in _COPULAS | _STANCE_VERBS)
             # "the red watering can leaks, use the blue one": a clause that only says how a thing is
             said_how = noun.end < len(task) and task[noun.end] in SUBJECT_VERBS
             noun.declared = noun.declared or (said_how and (task[noun.end + 1 : noun.end + 2] or ["."])[0] in (
@@ -1271,8 +1278,11 @@ class OfflineDecomposer:
                 continue  # "the neighbouring vase" is a vase
             if not nouns and not after_determiner and len(word) > 5 and word.endswith("ly"):
                 continue  # "especially the vase", "particularly the lamp": an adverb before the phrase
-            if (word in UNITS or word in NUMBER_WORDS) and not nouns:
-                continue  # "the 2 litre jug", "the dozen eggs": a measure or a count before the noun
+            if (word in UNITS and k and chunk[k - 1] in NUMBER_WORDS or word in NUMBER_WORDS) and not nouns:
+                continue  # "the two litre jug", "the dozen eggs": a measure or a count before the noun
+            if word in UNITS and not nouns and following.isalpha() and following not in _BOUNDARY:
+                nouns.append(word)  # "the pint glass", "the foot pump": a unit with no number names a kind
+                continue
             if not nouns and (word in PROPERTY_WORDS or word in DESCRIBING and word not in _MODIFIERS and (
                 "NOUN" not in word_classes(word)  # not "the rubber duck", "the paper towel"
             )) and following.isalpha() and following not in _BOUNDARY:
@@ -1320,7 +1330,8 @@ class OfflineDecomposer:
             if _may_happen(task, i):
                 continue  # "the cat bowl's water could spill": what may happen, not a request
             keeping = [k for k in range(max(0, i - 5), i - 1) if task[k] in _KEEPING and not (
-                task[k] == "left" and k and task[k - 1] in DETERMINERS)]  # "on the left, open ..." is a side
+                task[k] == "left" and k and task[k - 1] in DETERMINERS)  # "on the left, open ..." is a side
+                and not _CLAUSE_CLOSE & set(task[k + 1 : i])]  # "keep away from it and open the drawer": two clauses
             if word in _STATE_WORDS and i >= 2 and keeping and task[i - 1] not in _PERSONAL_PRONOUNS:
                 continue  # "I left the drawer open", "keep the bottle upright": how it is, not a request
             wanted = any(w in _WANTING for w in task[max(0, i - 6) : i])
@@ -1370,6 +1381,10 @@ class OfflineDecomposer:
                 AFTER_STAND_VERB
             ) and any(w in DETERMINERS for w in task[max(0, i - 4) : i - 1]):
                 continue  # "a soldering iron stand on the left": a holder named after what it holds
+            if word in _STANCE_VERBS and after_noun and following in _STANCE_PLACES and any(
+                w in DETERMINERS for w in task[max(0, i - 4) : i - 1]
+            ):
+                continue  # "two model aircraft hang over the drawer": where things are, not a request
             if hits:
                 parse.verbs.append(sorted(hits)[0])
                 parse.verb_at.append((i, sorted(hits)[0]))
@@ -2261,7 +2276,7 @@ def _partitives(words: list[str]) -> list[str]:
 _INSIDE_OR_ON = frozenset("in into inside on onto".split())
 _QUANTITY_NOUNS = frozenset(
     """couple pair lot lots loads load bunch bunches pile piles stack stacks heap heaps handful number dozen dozens
-    plenty row rows set group collection bundle cluster coil coils""".split()
+    plenty row rows set group collection bundle cluster coil coils splash dash""".split()
 )
 
 
@@ -2433,7 +2448,7 @@ def _without_disfluencies(tokens: list[str]) -> list[str]:
         for n in (1, 2):  # a determiner or a preposition said again: "the the", "on the on the"
             if len(out) >= 2 * n and out[-n:] == out[-2 * n : -n] and out[-1] in DETERMINERS | _BOUNDARY and all(
                 w.isalpha() for w in out[-n:]
-            ) and out[-1] not in ("that", "had"):
+            ) and out[-1] not in ("that", "had", "can"):  # "the jerry can can tip": a noun and its modal
                 del out[-n:]
     return out
 

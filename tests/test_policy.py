@@ -9,9 +9,8 @@ import torch
 from lano3dp.errors import CorruptFileError
 from lano3dp.guidance import GuidanceConfig
 from lano3dp.policy import DiffusionPolicy, LinearNormalizer, NormalizerNotFittedError, PolicyConfig
-from lano3dp.policy import unet as unet_module
 from lano3dp.policy.encoders import ObjectCloudsEncoder, PointMLPEncoder, ResidualPointEncoder
-from lano3dp.policy.unet import ConditionalUnet1D, _conv1d_as_matmul
+from lano3dp.policy.unet import ConditionalUnet1D
 
 TINY = dict(down_dims=(16, 32), diffusion_step_embed_dim=16, n_groups=4, point_hidden_dims=(16, 32),
             encoder_out=16, state_feature_dim=16, n_points=32, n_obs_steps=2)  # two steps: the windowing paths
@@ -200,26 +199,6 @@ def test_film_conditioning_changes_the_output():
     unet = ConditionalUnet1D(10, 24, 16, down_dims=(16, 32), n_groups=8)
     sample, step = torch.randn(1, 8, 10), torch.tensor([10])
     assert (unet(sample, step, torch.zeros(1, 24)) - unet(sample, step, torch.ones(1, 24))).abs().max() > 1e-3
-
-
-@pytest.mark.parametrize("batch", [1, 3, 8])
-@pytest.mark.parametrize(("kernel", "stride", "bias"), [(5, 1, True), (3, 2, True), (1, 1, False)])
-def test_small_batch_convolutions_as_matrix_products_equal_the_convolution(batch, kernel, stride, bias):
-    torch.manual_seed(0)
-    conv = torch.nn.Conv1d(24, 40, kernel, stride, kernel // 2, bias=bias)
-    x = torch.randn(batch, 24, 16)
-    out = _conv1d_as_matmul(conv, x)
-    assert out.shape == conv(x).shape
-    assert torch.allclose(out, conv(x), atol=1e-5)
-
-
-def test_the_unet_pass_is_the_same_whichever_way_its_convolutions_run(monkeypatch):
-    torch.manual_seed(0)
-    unet = ConditionalUnet1D(10, 24, 16, down_dims=(16, 32, 64), kernel_size=5, n_groups=8)
-    sample, step, cond = torch.randn(2, 8, 10), torch.tensor([3, 40]), torch.randn(2, 24)
-    as_matmul = unet(sample, step, cond)
-    monkeypatch.setattr(unet_module, "_MATMUL_CONV_MAX_BATCH", 0)
-    assert torch.allclose(as_matmul, unet(sample, step, cond), atol=1e-5)
 
 
 # ---- policy --------------------------------------------------------------------------------

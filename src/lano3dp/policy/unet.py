@@ -40,30 +40,7 @@ def _run(module: nn.Module, x: torch.Tensor) -> torch.Tensor:
         for child in module:
             x = _run(child, x)
         return x
-    if type(module) is nn.Conv1d and x.shape[0] <= _MATMUL_CONV_MAX_BATCH:
-        return _conv1d_as_matmul(module, x)
     return module.forward(x)
-
-
-# Up to this many samples a convolution runs faster as one matrix product: oneDNN's conv1d costs about the same
-# from 1 to 8 samples (the UNet's k=5 convolutions, 10 passes, one core: 16.9 ms at 1, 23.3 at 8, 30.1 at 16; as
-# matrix products 6.2, 21.2 and 37.4 ms). Sampling one episode's chunk took 28.6 -> 20.5 ms.
-_MATMUL_CONV_MAX_BATCH = 8
-
-
-def _conv1d_as_matmul(conv: nn.Conv1d, x: torch.Tensor) -> torch.Tensor:
-    """conv(x) as one matrix product over the unfolded windows of every sample: equal up to float rounding."""
-    (pad,), (stride,), (dilation,) = conv.padding, conv.stride, conv.dilation
-    if dilation != 1 or conv.groups != 1 or conv.padding_mode != "zeros":
-        return conv.forward(x)
-    batch = x.shape[0]
-    out_channels, in_channels, width = conv.weight.shape
-    windows = nn.functional.pad(x, (pad, pad)).unfold(2, width, stride)  # (B, C_in, L_out, K)
-    length = windows.shape[2]
-    windows = windows.permute(0, 2, 1, 3).reshape(batch * length, in_channels * width)
-    weight = conv.weight.reshape(out_channels, in_channels * width).t()
-    out = windows @ weight if conv.bias is None else torch.addmm(conv.bias, windows, weight)
-    return out.view(batch, length, out_channels).transpose(1, 2)
 
 
 class Conv1dBlock(nn.Sequential):

@@ -47,8 +47,8 @@ def eval_command(
     image_size: _options.ImageSizeOption = None,
     env: str = typer.Option(None, "--env", help=_options.ENV_HELP, rich_help_panel=_options.PANEL_ADVANCED),
     batch: int = typer.Option(1, min=1, help="Episodes stepped together in one process, their chunks sampled in "
-                                             "one call (1.8-2.9x the episodes per CPU-second at 16 to 50 on the "
-                                             "two CPUs measured).",
+                                             "one call (1.8-3.3x the episodes per CPU-second at 16 to 50 in the "
+                                             "runs measured, by CPU).",
                               rich_help_panel=_options.PANEL_ADVANCED),
     obstacles: list[str] = typer.Option(None, "--obstacles", help="Object to avoid (repeatable; default: every "
                                                                   "object the scene marks as an obstacle).",

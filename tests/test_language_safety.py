@@ -477,6 +477,9 @@ REFUSALS = [
     (SeveralTasksError, "put the red block in the drawer and then the blue one", "asks for the task again"),
     (SeveralTasksError, "pour the bowl into the pan, then the green one too", "asks for the task again"),
     (SeveralTasksError, "put the bottle in the drawer and once you're done close the microwave", "two tasks"),
+    (SeveralTasksError, "1) open the drawer 2) close the microwave", "two tasks"),
+    (SeveralTasksError, "1) stand bottle upright 2) bottle into cupboard", "a placement beside another task"),
+    (SeveralTasksError, "if the bottle fell over stand it up, otherwise open it", "'otherwise', another"),
     (UnknownVerbError, "i don't want the phone on the charger", "no skill fits"),
     (NegatedCommandError, "Please don't move the block into the drawer", "'don't move the block into the drawer'"),
     (SeveralTasksError, "Open the drawer and put the block in it",
@@ -799,6 +802,16 @@ NOT_REFUSED = [
     ("open the drawer, mind the 2 litre jug", ("open_drawer", ["drawer"], ["jug"])),
     ("water the plant, we're off to the slopes later", ("water_plants", ["watering can", "plant"], [])),
     ("put the phone on the base, I'm going out with my brother", ("phone_on_base", ["phone", "base"], [])),
+    # found by the blind table 37: what is poured from a container is its contents; "the beer glass is ..." is a
+    # glass; "..., so close the microwave" is the verb; laughter names nothing; what is only said to be there
+    # ("theres a snow globe on top of it") is weak evidence for a skill, and what hangs above is said to be there
+    ("could you pour the soup from the green bowl into the pan", ("bowl_pour", ["green bowl", "pan"], [])),
+    ("open the wine bottle, the beer glass is next to it", ("open_wine_bottle", ["bottle"], ["beer glass"])),
+    ("the cat is so close to the microwave, so close the microwave slowly",
+     ("close_microwave", ["microwave"], ["cat"])),
+    ("lol pls stand the bottle up", ("bottle_upright", ["bottle"], [])),
+    ("slide the drawer out please, theres a snow globe on top of it", ("open_drawer", ["drawer"], ["snow globe"])),
+    ("The mobile hangs right above the drawer, so open the drawer", ("open_drawer", ["drawer"], ["mobile"])),
 ]
 
 

@@ -54,9 +54,9 @@ NOT_OBJECTS = frozenset(
     cellar lounge pantry cafe bakery shop store supermarket market restaurant canteen cafeteria picnic party
     meeting breakfast brunch lunch dinner supper wedding funeral birthday anniversary ceremony concert festival
     christening graduation celebration holiday shoot lake beach park airport station school church gym river sea
-    city town village slope slopes till""".split()  # rooms, shops, places and events name where and when ("in the
-    # garage: open the drawer", "we're closing the bakery soon", "for the picnic", "we leave for the lake");
-    # "thanks a lot"
+    city town village slope slopes till haha hahaha lol hehe lmao omg""".split()  # rooms, shops, places and
+    # events name where and when ("in the garage: open the drawer", "we're closing the bakery soon", "for the
+    # picnic", "we leave for the lake"); "thanks a lot"; laughter
 ) - {"obstacle?"}
 # Units: "the grinder 8 cm to the right of the pan" names a grinder, "the 2 litre jug" a jug.
 UNITS = frozenset(
@@ -324,6 +324,8 @@ def object_mentions(
             found = _mention(words, i, j, end, known, permitted)
             if found is not None and i and words[i - 1] in _SPILLED and found.head not in OBJECT_NOUNS:
                 found = None  # "I spilled some flour, can you sweep it up": what was spilled is dirt, no object
+            if found is not None and i and words[i - 1] in _POURING and words[end : end + 1] in (["from"], ["out"]):
+                found = None  # "pour the batter from the bowl into the pan": what is poured is the contents
             if found is not None and i and words[i - 1] in ("during", "throughout", "since"):
                 found = None  # "it fell over during the last run": an event, no object
             if found is not None and words[i] in ("my", "our") and (
@@ -696,6 +698,7 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
     return bool(following) and following[0].isalpha() and past_verb_form(following[0])
 
 
+_POURING = frozenset("pour tip empty transfer".split())
 _ON_THEIR_WAY = frozenset("coming visiting arriving calling expecting".split())
 _REPORTING = [[w] for w in "said says told tells reckons reckoned thinks thought mentioned suggested asked".split()]
 # What follows a reporting verb when it reports ("the label says fragile" is an object's print, not a person).

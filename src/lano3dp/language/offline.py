@@ -171,6 +171,7 @@ _WARNINGS = frozenset("careful caution warning attention heads".split())
 _STANCE = frozenset("sitting standing lying placed located resting positioned kept".split())
 _MEASURE = re.compile(r"\b\d+(?:[.,]\d+)?\s*(?:" + "|".join(sorted(map(re.escape, UNITS), key=len, reverse=True))
                       + r")\b", re.IGNORECASE)
+_LIST_NUMBER = re.compile(r"(?:^|(?<=\s))\(?\d{1,2}[.)](?=\s)")
 _STANCE_VERBS = frozenset("hang hangs sit sits lie lies rest rests lean leans".split())
 _STANCE_PLACES = frozenset("over above on in near next beside behind under below by from against across".split())
 # Words before a noun that make it a landmark ("the drawer under the microwave"), not a task object.
@@ -513,6 +514,7 @@ class OfflineDecomposer:
         # "the 2 litre jug", "8 cm to the right": a measure says how much, never what (the tokens drop its digits,
         # and a unit left alone names a kind: "the pint glass", "the foot pump")
         text = _MEASURE.sub(" ", text)
+        text = _LIST_NUMBER.sub(" ; ", text)  # "1) close the microwave 2) stand the bottle": numbered steps
         text = re.sub(r"\b(lay|laying|lays|put|putting) a finger on\b", lambda m: "touching" if m.group(1).endswith(
             "ing") else "touch", text, flags=re.IGNORECASE)  # an idiom of touching
         text = re.sub(r"\s*(?:->|=>|-->|→)\s*", " into ", text)  # "block -> drawer": shorthand for "into"
@@ -846,6 +848,23 @@ class OfflineDecomposer:
             if position in permitted and lemmas(tokens[position]) & _COLLISION_VERBS and not particles & set(said):
                 continue  # "push them aside if you need to": leave to touch, not a task ("push it shut" is one)
             counted.append((chosen[0], skills))
+        said_with_verb = {clause_of[p] for p, _ in parse.verb_at}
+        for clause in sorted(set(clause_of) - said_with_verb):
+            words = [t for t, c in zip(tokens, clause_of, strict=True) if c == clause and t not in _TASK_BREAKS]
+            k = next((j for j, w in enumerate(words) if w in ("into", "onto")), None)
+            things = [w for w in words[:k] if w not in DETERMINERS and w not in _MODIFIERS] if k else []
+            if counted and things and all(singular(w) in self._object_words for w in things) and any(
+                singular(w) in self._object_words or "NOUN" in word_classes(w) for w in words[k + 1 :]
+            ):  # "1) stand bottle upright 2) bottle into drawer": a placement said with no verb is a task too
+                raise SeveralTasksError(instruction, f"'{' '.join(words)}' asks for a placement beside another task; a "
+                                                     "plan runs one skill, so give them one at a time")
+        alternative = next((k for k, w in enumerate(tokens) if w in ("otherwise", "else")), None)
+        if alternative is not None:  # "if the drawer is closed open it, otherwise close the microwave"
+            before = {n for p, v in parse.verb_at if p < alternative for n in self._verbs[v]}
+            after = {n for p, v in parse.verb_at if p > alternative for n in self._verbs[v]}
+            if before and after and before.isdisjoint(after):
+                raise SeveralTasksError(instruction, f"it asks for one task or, '{tokens[alternative]}', another; a "
+                                                     "plan runs one skill, so say which to do")
         for k, (verb, skills) in enumerate(counted):
             for other, other_skills in counted[k + 1 :]:
                 if skills.isdisjoint(other_skills):
@@ -1366,8 +1385,9 @@ class OfflineDecomposer:
                 k -= 1
             if k < i - 1 and task[k] in _COPULAS:
                 continue  # "it's fully charged", "the drawer is already open": a state, not a request
-            if word == "close" and (following in ("to", "by", "beside", "behind", "next") or previous in _DEGREE):
-                continue
+            if word == "close" and (following in ("to", "by", "beside", "behind", "next") or previous in _DEGREE and (
+                following not in DETERMINERS)):
+                continue  # "close to the mug", "so close": a place; not "..., so close the microwave"
             if word == "right" and following in _RIGHT_AS_ADVERB_BEFORE:
                 continue  # "a vase right next to the drawer", "right there": an adverb, not "right the bottle"
             permission = tuple(task[max(0, i - 2) : i]) in _PERMITTING or previous in ("may", "can")
@@ -1381,7 +1401,9 @@ class OfflineDecomposer:
                 AFTER_STAND_VERB
             ) and any(w in DETERMINERS for w in task[max(0, i - 4) : i - 1]):
                 continue  # "a soldering iron stand on the left": a holder named after what it holds
-            if word in _STANCE_VERBS and after_noun and following in _STANCE_PLACES and any(
+            place = task[i + 2] if following in ("right", "just", "directly") and i + 2 < len(task) else following
+            unknown_before = previous.isalpha() and not word_classes(previous)  # "the dreamcatcher hangs ..."
+            if word in _STANCE_VERBS and (after_noun or unknown_before) and place in _STANCE_PLACES and any(
                 w in DETERMINERS for w in task[max(0, i - 4) : i - 1]
             ):
                 continue  # "two model aircraft hang over the drawer": where things are, not a request
@@ -1511,7 +1533,7 @@ class OfflineDecomposer:
             return False
         after = task[end + 1] if end + 1 < len(task) else "."
         # what may end such a phrase; not a particle ("the bottle fell over", "the drawer ends up open")
-        return after in _SENTENCE_END or after in _DESTINATIONS | _PHRASE_ENDS
+        return after in _SENTENCE_END or after in _DESTINATIONS | _PHRASE_ENDS or after in _COPULAS
 
     @staticmethod
     def _vocabulary_match(task: list[str], i: int, vocabulary: Sequence[str]) -> str | None:
@@ -1730,8 +1752,13 @@ class OfflineDecomposer:
     def _weight(noun: _Noun, parse: Parse) -> float:
         """How much a noun says about the skill: half for one only said to be somewhere ("there's a toy on the
         right", "the pill organiser sits on top of it")."""
-        located = any(w in SUBJECT_VERBS or w in _STANCE for w in parse.tokens[noun.index : noun.end + 1])
-        return 1.0 if noun.in_task and not located else 0.5
+        tokens = parse.tokens
+        located = any(w in SUBJECT_VERBS or w in _STANCE for w in tokens[noun.index : noun.end + 1])
+        k = noun.index - 1
+        while k >= 0 and (tokens[k] in DETERMINERS or tokens[k] in _MODIFIERS or is_adjective(tokens[k])):
+            k -= 1
+        there = k >= 0 and (tokens[k] == "theres" or tokens[k] in _COPULAS and tokens[k - 1 : k] == ["there"])
+        return 1.0 if noun.in_task and not located and not there else 0.5  # "theres a globe on top of it"
 
     @staticmethod
     def _same_object(skill: SkillSpec, noun: _Noun, assigned: dict[int, tuple[_Noun, bool]]) -> bool:

@@ -84,9 +84,10 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_32.json", 170, 48, 170),  # first run 165/170 (score_blind.py), 167/170 (convention)
     ("instructions_blind_33.json", 179, 48, 176),  # first run 167/179 (score_blind.py), 171/179 (convention)
     ("instructions_blind_34.json", 179, 48, 178),  # first run 169/179 (score_blind.py), 172/179 (convention)
-    ("instructions_blind_35.json", 180, 48, 171),  # first run 157/180 (score_blind.py), 162/180 (convention)
-    ("instructions_blind_36.json", 180, 49, 166),  # first run 153/180 (score_blind.py), 159/180 (convention)
+    ("instructions_blind_35.json", 180, 48, 172),  # first run 157/180 (score_blind.py), 162/180 (convention)
+    ("instructions_blind_36.json", 180, 49, 167),  # first run 153/180 (score_blind.py), 159/180 (convention)
     ("instructions_blind_37.json", 178, 49, 176),  # first run 166/178 (score_blind.py), 170/178 (convention)
+    ("instructions_blind_38.json", 178, 49, 178),  # first run 169/178 (score_blind.py), 175/178 (convention)
     ("instructions_blind_27.json", 153, 46, 149),  # first run 144/153 (score_blind.py), 148/153 (convention)
 ])  # fmt: skip
 def test_later_blind_tables_keep_their_rates_and_stay_safe(table, rows, refusals, exact):

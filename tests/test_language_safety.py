@@ -812,6 +812,11 @@ NOT_REFUSED = [
     ("lol pls stand the bottle up", ("bottle_upright", ["bottle"], [])),
     ("slide the drawer out please, theres a snow globe on top of it", ("open_drawer", ["drawer"], ["snow globe"])),
     ("The mobile hangs right above the drawer, so open the drawer", ("open_drawer", ["drawer"], ["mobile"])),
+    # found by the blind table 38: a surface is the landmark of a property, never its subject ("every plate on the
+    # counter is fragile"); "fell over" after a surface is the verb; what "is right by it" is weak evidence
+    ("Open the drawer. Every jar on the shelf is fragile.", ("open_drawer", ["drawer"], ["jar"])),
+    ("the mug on the workbench fell over, open the drawer", ("open_drawer", ["drawer"], ["mug"])),
+    ("slide the drawer open, the heater is right by it", ("open_drawer", ["drawer"], ["heater"])),
 ]
 
 

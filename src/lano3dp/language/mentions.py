@@ -50,9 +50,9 @@ NOT_OBJECTS = frozenset(
     year morning afternoon evening tonight today tomorrow yesterday okay ok alright berth contact itself
     themselves vicinity surroundings none dear kitchen room house home lab office fortune favour favor look try
     go shot chance idea problem mistake reason sense care attention hurry rush sec mo deal distance space
-    step other others rest help lot bathroom garage studio workshop classroom nursery bedroom hallway basement attic
-    cellar lounge pantry cafe bakery shop store supermarket market restaurant canteen cafeteria picnic party
-    meeting breakfast brunch lunch dinner supper wedding funeral birthday anniversary ceremony concert festival
+    step other others rest help lot bathroom garage studio workshop workbench classroom nursery bedroom hallway
+    basement attic cellar lounge pantry cafe bakery shop store supermarket market restaurant canteen cafeteria picnic
+    party meeting breakfast brunch lunch dinner supper wedding funeral birthday anniversary ceremony concert festival
     christening graduation celebration holiday shoot lake beach park airport station school church gym river sea
     city town village slope slopes till haha hahaha lol hehe lmao omg""".split()  # rooms, shops, places and
     # events name where and when ("in the garage: open the drawer", "we're closing the bakery soon", "for the
@@ -601,6 +601,8 @@ def _noun_run(words: Sequence[str], j: int, known, verbs: set[str]) -> int:
             break  # "a jigsaw puzzle half done": how far along it is, no part of its name
         if word == "old" and end > j and words[end - 1] in ("year", "years", "month", "months"):
             return end + 1  # "my 2 year old keeps grabbing it": a child (its number was no word), no object
+        if end > j and past_verb_form(word) and words[end + 1 : end + 2] in _FELL_PARTICLES:
+            break  # "the bottle on the workbench fell over": the verb after its subject, not a "workbench fell"
         if end > j and _result_state(words, j, end):
             break  # "don't get the charts wet", "keep the rug dry": the state wanted, no part of the name
         if end > j and _verb_with_object(words, end):
@@ -698,6 +700,7 @@ def _person_who_did(mention: Mention, words: Sequence[str], end: int) -> bool:
     return bool(following) and following[0].isalpha() and past_verb_form(following[0])
 
 
+_FELL_PARTICLES = [[w] for w in "over off down out up away apart".split()]
 _POURING = frozenset("pour tip empty transfer".split())
 _ON_THEIR_WAY = frozenset("coming visiting arriving calling expecting".split())
 _REPORTING = [[w] for w in "said says told tells reckons reckoned thinks thought mentioned suggested asked".split()]

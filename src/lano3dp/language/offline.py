@@ -131,7 +131,7 @@ _COLLISION_VERBS = frozenset(
     wet scatter displace dislodge budge shift crush squash dent ruin wreck""".split()
 )
 # Places to set an object down that no skill puts things on.
-_SURFACES = frozenset("table counter countertop worktop floor ground side desk shelf surface".split())
+_SURFACES = frozenset("table counter countertop worktop workbench floor ground side desk shelf surface".split())
 _WISHES = (("i", "want"), ("i", "'d", "like"), ("i", "would", "like"), ("i", "need"))  # before a wanted placement
 _PLACEMENT_MODALS = frozenset("needs need has have to should must can will ought".split())
 _ROBOT_PARTS = frozenset("gripper grippers hand hands arm arms finger fingers elbow wrist claw".split())
@@ -1151,9 +1151,10 @@ class OfflineDecomposer:
             plural = True  # "there are a mug and a glass in the way"
         while start < end and words[start] in _LIST_SEPARATORS:
             start += 1
-        if end - start == 1 and words[start] in ("it", "them") and start >= 3 and words[start - 1] in (
-            _LOCATIVES | {"to", "of"}
-        ):  # "the petri dishes beside it are fragile": the dishes, beside the object said before
+        pronoun = end - start == 1 and words[start] in ("it", "them")
+        places = _LOCATIVES | {"to", "of"} if pronoun else (_LOCATIVES | {"on", "in", "at"}) - {"of"}
+        if (pronoun or words[end - 1] in _SURFACES) and start >= 3 and words[start - 1] in places:
+            # "the petri dishes beside it are fragile", "every tin on the shelf is fragile": not the landmark
             k = start - 1
             while k > 0 and words[k] in _LOCATIVES | _NEAR_WORDS:
                 k -= 1
@@ -1758,7 +1759,8 @@ class OfflineDecomposer:
         while k >= 0 and (tokens[k] in DETERMINERS or tokens[k] in _MODIFIERS or is_adjective(tokens[k])):
             k -= 1
         there = k >= 0 and (tokens[k] == "theres" or tokens[k] in _COPULAS and tokens[k - 1 : k] == ["there"])
-        return 1.0 if noun.in_task and not located and not there else 0.5  # "theres a globe on top of it"
+        said_to_be = noun.end < len(tokens) and tokens[noun.end] in _COPULAS - {"'s"}  # "the fan is right by it"
+        return 1.0 if noun.in_task and not located and not there and not said_to_be else 0.5
 
     @staticmethod
     def _same_object(skill: SkillSpec, noun: _Noun, assigned: dict[int, tuple[_Noun, bool]]) -> bool:

@@ -782,10 +782,11 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
         if len(chunk) > 1 and chunk[-1] in _DETACHABLE:
             break  # "the pan lid": a lid comes off, so it is an object of its own
         chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
+    def measure(first: str) -> bool:  # "the two litre jug", "a dozen eggs"; not "the pint glass"
+        return first in NUMBER_WORDS or first in UNITS and _after_number(words, j, chunk, words[j:end])
+
     while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
-        chunk[0] in NOT_OBJECTS and chunk[0] not in _ROOMS and not known_ends and not (
-            chunk[0] in UNITS and not _after_number(words, j, chunk, words[j:end])) or chunk[0] in NUMBER_WORDS
-        or chunk[0] in UNITS and _after_number(words, j, chunk, words[j:end])
+        chunk[0] in NOT_OBJECTS - UNITS and chunk[0] not in _ROOMS and not known_ends or measure(chunk[0])
         or is_adjective(chunk[0]) and (chunk[0] not in OBJECT_NOUNS or chunk[0] in MATERIALS)
         or chunk[0] in PROPERTY_WORDS  # "the sharp knives", though "sharp" is a noun too
     ):  # not "the paper shredder": a thing's name before a noun names its kind

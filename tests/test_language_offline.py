@@ -88,6 +88,7 @@ def test_blind_table_3_plans_exactly_and_safely():
     ("instructions_blind_36.json", 180, 49, 167),  # first run 153/180 (score_blind.py), 159/180 (convention)
     ("instructions_blind_37.json", 178, 49, 176),  # first run 166/178 (score_blind.py), 170/178 (convention)
     ("instructions_blind_38.json", 178, 49, 178),  # first run 169/178 (score_blind.py), 175/178 (convention)
+    ("instructions_blind_39.json", 178, 49, 177),  # first run 174/178 (score_blind.py), 177/178 (convention)
     ("instructions_blind_27.json", 153, 46, 149),  # first run 144/153 (score_blind.py), 148/153 (convention)
 ])  # fmt: skip
 def test_later_blind_tables_keep_their_rates_and_stay_safe(table, rows, refusals, exact):

@@ -396,14 +396,6 @@ def _plural_noun(word: str) -> bool:
     return singular(word) != word and "NOUN" in word_classes(singular(word))
 
 
-def _after_number(words: Sequence[str], j: int, chunk: Sequence[str], said: Sequence[str]) -> bool:
-    """Whether the unit word leading `chunk` (what is left of the phrase `said`, which starts at `j`) follows a
-    number word: "the two litre jug" measures; "the pint glass", "the foot pump" name a kind (a measure in digits
-    is gone before the words are read)."""
-    k = j + len(said) - len(chunk) - 1  # the word before the chunk's first word
-    return k >= 0 and (words[k].isdigit() or words[k] in NUMBER_WORDS)
-
-
 def _unlisted_plural(word: str) -> bool:
     """A plural of a noun the lexicon lacks ("bookends", "crucibles"): nouns are open-ended, verbs are not."""
     return word.isalpha() and singular(word) != word and not word_classes(word) and not word_classes(singular(word))
@@ -782,15 +774,17 @@ def _mention(words, i: int, j: int, end: int, known, permitted: set[int]) -> Men
         if len(chunk) > 1 and chunk[-1] in _DETACHABLE:
             break  # "the pan lid": a lid comes off, so it is an object of its own
         chunk.pop()  # "the drawer handle", "the bowl contents": a part or contents of the object named
-    def measure(first: str) -> bool:  # "the two litre jug", "a dozen eggs"; not "the pint glass"
-        return first in NUMBER_WORDS or first in UNITS and _after_number(words, j, chunk, words[j:end])
-
+    first = j  # the index in `words` of chunk[0]: the loop below drops words from the front
+    # a measure: "the two litre jug", "a dozen eggs"; a unit after no number names a kind ("the pint glass"; a measure
+    # in digits is gone before the words are read)
     while len(chunk) > 1 and _known_at(chunk, 0, known) != len(chunk) and (
-        chunk[0] in NOT_OBJECTS - UNITS and chunk[0] not in _ROOMS and not known_ends or measure(chunk[0])
+        chunk[0] in NOT_OBJECTS - UNITS and chunk[0] not in _ROOMS and not known_ends or chunk[0] in NUMBER_WORDS
+        or chunk[0] in UNITS and first > 0 and words[first - 1] in NUMBER_WORDS
         or is_adjective(chunk[0]) and (chunk[0] not in OBJECT_NOUNS or chunk[0] in MATERIALS)
         or chunk[0] in PROPERTY_WORDS  # "the sharp knives", though "sharp" is a noun too
     ):  # not "the paper shredder": a thing's name before a noun names its kind
         chunk.pop(0)  # "the open drawer", "the glass beaker", "the 2 litre jug": the object is the noun
+        first += 1
     # ("the trash can", "the table lamp", "the cutting board": a noun before a known noun names its kind)
     # a lone adjective names nothing ("they're both hot"; "a good robot" once "robot" is dropped); a word no
     # lexicon has, alone after its article, is a name ("the babed")

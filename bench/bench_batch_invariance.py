@@ -34,7 +34,6 @@ from lano3dp.guidance import GuidanceConfig
 from lano3dp.guidance.costs.obstacles import Sphere
 from lano3dp.policy import DiffusionPolicy
 from lano3dp.policy.pretrained import packaged_checkpoint
-from lano3dp.report import markdown_table
 
 # The layers whose CPU kernels depend on the batch size (oneDNN above one sample, im2col and one matrix product
 # for one; matrix products pick kernels by shape); GroupNorm and the element-wise operations do not.
@@ -111,21 +110,6 @@ def measure(policy: DiffusionPolicy, batch: int, chunks: int, guided: bool) -> d
             "alone_over_per_sample": round(cost["alone"] / cost["per_sample"], 2)}
 
 
-def markdown(record: dict[str, Any]) -> str:
-    table = []
-    for cell in record["cells"]:
-        equal, largest, cost = cell["bit_equal_chunks"], cell["largest_difference"], cell["cpu_ms_per_chunk"]
-        for mode in ("default", "per_sample"):
-            table.append(["guided" if cell["guided"] else "unguided", cell["batch"], mode.replace("_", "-"),
-                          f"{equal[mode]} of {cell['chunks']}", f"{largest[mode]:.1e}", cost["alone"], cost[mode],
-                          cell[f"alone_over_{mode}"]])
-    machine = (record.get("provenance") or {}).get("machine") or {}
-    on = f"Measured on {machine['processor']}, one torch thread.\n\n" if machine.get("processor") else ""
-    return ("# Batch invariance of sampling\n\n" + on
-            + markdown_table(["sampling", "batch", "kernels", "chunks bit-equal to alone", "largest difference",
-                              "CPU-ms a chunk alone", "CPU-ms a chunk in the batch", "speed-up"], table) + "\n")
-
-
 def main(argv: list[str] | None = None) -> None:
     parser = bench_parser(__file__, __doc__, tasks="put_item_in_drawer",
                           episodes=Unused("it samples chunks, not episodes (--chunks)"),
@@ -143,7 +127,7 @@ def main(argv: list[str] | None = None) -> None:
         for batch in (int(b) for b in args.batches.split(",")):
             cells.append(measure(policy, batch, args.chunks, guided))
             print(cells[-1], flush=True)
-    write_results("batch_invariance", args, {"cells": cells}, markdown=markdown)
+    write_results("batch_invariance", args, {"cells": cells})  # its page: docs/benchmarks/components.md
 
 
 if __name__ == "__main__":

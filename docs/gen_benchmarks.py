@@ -276,6 +276,25 @@ def bench_eval_speed(name: str, data: dict) -> list[str]:
             f"{load['diffusers_import_cpu_s']} CPU-s.", ""]
 
 
+def batch_invariance(name: str, data: dict) -> list[str]:
+    """Chunks sampled in a batch against each sampled alone: bit equality and cost, default and per-sample kernels."""
+    rows = []
+    for cell in data["cells"]:
+        cost = cell["cpu_ms_per_chunk"]
+        for kernels in ("default", "per_sample"):
+            rows.append(["guided" if cell["guided"] else "unguided", cell["batch"], kernels.replace("_", "-"),
+                         f"{cell['bit_equal_chunks'][kernels]} of {cell['chunks']}",
+                         f"{cell['largest_difference'][kernels]:.1e}", cost["alone"], cost[kernels],
+                         f"{cell[f'alone_over_{kernels}']}x"])
+    machine = made_by(data).get("machine") or {}
+    on = f" on {machine['processor']}" if machine.get("processor") else ""
+    return [f"DDIM-10 chunks of the packaged {data['config']['tasks'][0]} policy sampled in a batch against each "
+            f"sampled alone with the same noise, process CPU time on one torch thread{on}. Per-sample kernels: "
+            "every Linear and convolution called once per sample, as a batch of one calls it.", "",
+            markdown_table(["sampling", "batch", "kernels", "chunks bit-equal to alone", "largest difference",
+                            "CPU-ms a chunk alone", "CPU-ms a chunk in the batch", "speed-up"], rows), ""]
+
+
 def cuda_runtime(name: str, data: dict) -> list[str]:
     """A guided episode on the CPU and on an accelerator, chunk by chunk, and batched sampling there."""
     runs = [[run["device"], run["steps"], run["guided_chunks"], run["error"] or "none", f"{run['path_length']:.3f} m"]
@@ -383,6 +402,7 @@ PAGES: dict[str, tuple[str, str, list[tuple[str, Renderer]]]] = {
                                      "redesign checked episode for episode."),
                       [("bench_guidance", bench_guidance), ("bench_policy", bench_policy), ("bench_sim", bench_sim),
                        ("task_experts", task_experts), ("bench_eval_speed", bench_eval_speed),
+                       ("batch_invariance", batch_invariance),
                        ("cuda_runtime", cuda_runtime), ("refactor_equivalence", refactor_equivalence)]),
 }
 

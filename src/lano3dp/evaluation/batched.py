@@ -16,7 +16,8 @@ works from one chunk request to the next while the others wait, instead of all s
 
 A batched chunk equals the chunk sampled alone up to float rounding (matrix products of another batch size take
 other kernels; about 1e-6 in the normalised action): the noise is the same, an episode's outcome can still differ
-where a contact turns on such a difference. `bench/bench_eval_speed.py` measures both.
+where a contact turns on such a difference. `bench/bench_eval_speed.py` measures both;
+`bench/bench_batch_invariance.py` what bit-equal chunks would cost (the one-sample kernels: most of the saving).
 """
 
 from __future__ import annotations

@@ -189,7 +189,8 @@ def report(args) -> None:
             "first_frame_clouds": json.loads(clouds_path.read_text()) if clouds_path.exists() else None,
             "note": "hand = median over episodes of the lowest EE height within 3 cm (xy) of the handle minus the "
                     "handle's height (negative: below the bar)"}
-    path = write_script_results("instances_open_drawer", command=command, config=script_config(args), body=body,
+    path = write_script_results(f"instances_open_drawer{args.tag}", command=command, config=script_config(args),
+                                body=body,
                                 markdown=lambda record: "\n".join([
                                     "# open_drawer on new drawer instances", "",
                                     markdown_table(["checkpoint", "variation", "success (95% CI)",
@@ -218,6 +219,8 @@ def main(argv=None) -> None:
     parser.add_argument("--episodes", type=int, default=50)
     parser.add_argument("--workers", type=int, default=1)
     parser.add_argument("--work", type=Path, default=ROOT / "bench" / "out" / "learning")
+    parser.add_argument("--tag", default="", help="report: suffix of the results' name, "
+                                                  "results/instances_open_drawer<tag>.json")
     args = parser.parse_args(argv)
     if args.command in ("eval", "clouds") and args.seed == 0:
         args.seed = 1_000_000  # evaluation seeds, apart from the demonstrations'

@@ -93,8 +93,8 @@ def trace(episode: dict, variation: str) -> dict:
 
 
 def evaluate(args) -> None:
-    from lano3dp.evaluate import EvalConfig
-    from lano3dp.evaluate import evaluate as run_evaluation
+    from lano3dp.evaluation import EvalConfig
+    from lano3dp.evaluation import evaluate as run_evaluation
 
     for checkpoint in args.checkpoint:
         for variation in args.variations.split(","):
@@ -117,18 +117,15 @@ def evaluate(args) -> None:
 
 def clouds(args) -> None:
     """The drawer cloud of each episode's first frame, clean against instance, next to the handle's height."""
-    from lano3dp.evaluate import dataset_settings
-
+    from lano3dp.evaluation import PerceptionSettings, PolicyBundle
     from lano3dp.geometry.frame import observe
-    from lano3dp.perception import ObjectObserver, SimOracleSegmenter
     from lano3dp.sim.env import TabletopEnv
 
-    settings = dataset_settings(resolve("packaged"))
-    observer = ObjectObserver(SimOracleSegmenter(), n_points=settings.n_points, crop_low=settings.crop_low,
-                              crop_high=settings.crop_high)
+    bundle = PolicyBundle.load(resolve(args.checkpoint[0] if args.checkpoint else "packaged"), task=TASK)
+    observer = bundle.observer(PerceptionSettings())
     rows = []
     for variation in ("clean", "instance"):
-        env = TabletopEnv(TASK, variation=variation, image_size=settings.image_size, render_rgb=False)
+        env = TabletopEnv(TASK, variation=variation, image_size=bundle.observation.image_size, render_rgb=False)
         for seed in range(args.seed, args.seed + args.episodes):
             obs, info = env.reset(seed=seed)
             frame, _ = observe(env, obs)

@@ -109,6 +109,7 @@ def evaluate(args) -> None:
             result = run_evaluation(config)
             result["traces"] = [trace(e, variation) for e in result["episodes"]]
             result["wall_s"] = round(time.perf_counter() - started, 1)
+            result["command"] = "python bench/bench_instances.py " + shlex.join(sys.argv[1:])
             for episode in result["episodes"]:  # the traces keep what the report needs; the paths are large
                 episode.pop("ee_path", None)
             out.write_text(json.dumps(result, indent=1, default=str))

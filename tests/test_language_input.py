@@ -63,10 +63,10 @@ def test_look_alike_letters_other_scripts_and_bidi_overrides_are_refused(decompo
 
 def test_a_megabyte_instruction_is_refused_at_once_before_parsing(decomposer):
     huge = "put the block in the drawer and avoid the mug " * 23_000  # ~1 MB
-    start = time.perf_counter()
+    start = time.thread_time()  # CPU time: a busy machine does not fail it
     with pytest.raises(InputRejectedError) as refused:
         decomposer.decompose(huge)
-    assert time.perf_counter() - start < 0.05
+    assert time.thread_time() - start < 0.05
     assert f"at most {MAX_INSTRUCTION_CHARS:,} are accepted" in str(refused.value)
     assert len(str(refused.value)) < 300  # the message quotes the start of it, not a megabyte
     assert normalize_instruction("a" * MAX_INSTRUCTION_CHARS).text == "a" * MAX_INSTRUCTION_CHARS
@@ -95,19 +95,21 @@ ADVERSARIAL = {
 
 
 def test_no_instruction_within_the_cap_takes_the_parser_more_than_about_100_ms(decomposer):
-    """Each pattern repeated to the 1,000-character cap (the shapes that made rules quadratic before). The bound
-    is the best of three runs, so a busy CI machine does not fail it; measured 13-50 ms on 2 busy cores."""
+    """Each pattern repeated to the 1,000-character cap (the shapes that made rules quadratic before). The parser's
+    CPU time (its thread's), best of three, so that a busy machine does not fail it: a wall-clock bound read 163 ms
+    for 101 ms of CPU beside two trainings. Measured 1-27 ms of CPU, punctuation the slowest (101 ms before the
+    scans over every clause, permission phrase and obstacle cue became lookups)."""
     times = {}
     for name, unit in ADVERSARIAL.items():
         text = (unit * (MAX_INSTRUCTION_CHARS // len(unit) + 1))[:MAX_INSTRUCTION_CHARS]
         best = float("inf")
         for _ in range(3):
-            start = time.perf_counter()
+            start = time.thread_time()
             try:
                 decomposer.decompose(text)
             except ValueError:  # refusals are answers too
                 pass
-            best = min(best, time.perf_counter() - start)
+            best = min(best, time.thread_time() - start)
         times[name] = best
     assert max(times.values()) < 0.15, times
 

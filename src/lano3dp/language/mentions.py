@@ -216,11 +216,23 @@ def _joins_subjects(words: Sequence[str], k: int) -> bool:
         w.isalpha() and (w in _MODIFIERS or not word_classes(w) or "NOUN" in word_classes(w)) for w in phrase[1:])
 
 
+def by_first_word(phrases: tuple[tuple[str, ...], ...]) -> dict[str, tuple[tuple[str, ...], ...]]:
+    """Phrases grouped by their first word, so a word is matched against the few that can start there."""
+    grouped: dict[str, list[tuple[str, ...]]] = {}
+    for phrase in phrases:
+        grouped.setdefault(phrase[0], []).append(phrase)
+    return {word: tuple(group) for word, group in grouped.items()}
+
+
+_PERMISSIONS_BY_FIRST = by_first_word(_PERMISSIONS)
+_PERMITTED_AFTER_BY_FIRST = by_first_word(_PERMITTED_AFTER)
+
+
 def permitted_spans(words: Sequence[str]) -> set[int]:
     """Indices of the tokens a permission covers ("you can nudge the mug", "the towel is fine")."""
     permitted: set[int] = set()
     for i in range(len(words)):
-        for phrase in _PERMISSIONS:
+        for phrase in _PERMISSIONS_BY_FIRST.get(words[i], ()):
             if tuple(words[i : i + len(phrase)]) == phrase:
                 k = i + len(phrase)
                 # "feel free to move the lantern and the tent pegs": a list of objects goes on after "and"
@@ -231,7 +243,7 @@ def permitted_spans(words: Sequence[str]) -> set[int]:
                     k += 1
         # "the spoon and the mitt can both be touched": a quantifier or adverb after the modal changes nothing
         skip = 1 if words[i] in ("can", "may") and words[i + 1 : i + 2] and words[i + 1] in _AFTER_MODAL else 0
-        for phrase in _PERMITTED_AFTER:
+        for phrase in _PERMITTED_AFTER_BY_FIRST.get(words[i], ()):
             if (words[i], *words[i + 1 + skip : i + len(phrase) + skip]) == phrase:
                 k = i - 1 - (words[i - 1 : i] == [":"])  # "towel: contact ok"
                 if words[k : k + 1] in (["that"], ["this"], ["it"]) and words[k - 1 : k] == [","]:

@@ -65,6 +65,7 @@ from lano3dp.language.mentions import (
     SWEEP_VERBS,
     UNITS,
     Mention,
+    by_first_word,
     enforce_mentions,
     is_adjective,
     modal_can,
@@ -269,6 +270,8 @@ _CUES: tuple[tuple[str, ...], ...] = (
     ("don't", "get"), ("dont", "get"), ("not", "get"), ("never", "get"),  # "don't get it wet"
     ("keep", "off"), ("stay", "off"), ("keeping", "off"), ("staying", "off"),
 )  # fmt: skip
+# Checked at every token: only the cues that start with the token's word (every cue starts with a word, not a class).
+_CUES_BY_FIRST = by_first_word(_CUES)
 _CONTRASTS = frozenset({("not", "<det>"), ("but", "not"), ("and", "not")}) | {
     c for c in _CUES if c[0] == "not" and c[-1] == "<det>"}
 # Predicates said of the noun phrase before them ("the mug is in the way").
@@ -849,8 +852,12 @@ class OfflineDecomposer:
                 continue  # "push them aside if you need to": leave to touch, not a task ("push it shut" is one)
             counted.append((chosen[0], skills))
         said_with_verb = {clause_of[p] for p, _ in parse.verb_at}
+        clause_words: dict[int, list[str]] = {}  # grouped once: a clause per punctuation mark made the scan quadratic
+        for token, clause in zip(tokens, clause_of, strict=True):
+            if token not in _TASK_BREAKS:
+                clause_words.setdefault(clause, []).append(token)
         for clause in sorted(set(clause_of) - said_with_verb):
-            words = [t for t, c in zip(tokens, clause_of, strict=True) if c == clause and t not in _TASK_BREAKS]
+            words = clause_words.get(clause, [])
             k = next((j for j, w in enumerate(words) if w in ("into", "onto")), None)
             things = [w for w in words[:k] if w not in DETERMINERS and w not in _MODIFIERS] if k else []
             if counted and things and all(singular(w) in self._object_words for w in things) and any(
@@ -935,7 +942,7 @@ class OfflineDecomposer:
         """(start, end, cue) token spans governed by obstacle cues."""
         spans, i = [], 0
         while i < len(words):
-            cue = next((c for c in _CUES if self._cue_at(words, i, c)), None)
+            cue = next((c for c in _CUES_BY_FIRST.get(words[i], ()) if self._cue_at(words, i, c)), None)
             if cue is not None and cue[0] == "mind" and i and words[i - 1] in ("don't", "dont", "not"):
                 cue = None  # "I don't mind if you brush the boxes": a permission (`mentions`), not a caution
             if cue == ("around",) and _around_says_where(words, i):
@@ -993,7 +1000,7 @@ class OfflineDecomposer:
         word = words[i]
         if word in _SENTENCE_END or word in _CLAUSE_ENDS:
             return True
-        if any(self._cue_at(words, i, c) for c in _CUES if c[-1] != "<det>"):
+        if any(self._cue_at(words, i, c) for c in _CUES_BY_FIRST.get(word, ()) if c[-1] != "<det>"):
             return True
         previous = words[i - 1] if i else ","
         # ", which is next to it", ", it is right in front": a new clause about the object, not more objects

@@ -182,3 +182,12 @@ def test_an_everyday_verb_without_its_meaning_is_refused_with_a_suggestion(decom
         decomposer.decompose("smash the bowl into the pan")
     with pytest.raises(UnknownVerbError, match="'grab' is not a verb any skill is asked for with"):
         decomposer.decompose("grab the mug")
+
+
+def test_every_obstacle_cue_starts_with_a_word_so_the_lookup_by_first_word_finds_it():
+    """The parser checks at each token only the cues that start with its word; a cue starting with a class such as
+    <ing> would never be found there."""
+    from lano3dp.language import offline
+
+    assert all(not cue[0].startswith("<") for cue in offline._CUES)
+    assert sum(len(cues) for cues in offline._CUES_BY_FIRST.values()) == len(offline._CUES)

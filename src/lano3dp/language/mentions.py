@@ -174,18 +174,23 @@ class Mention:
         return self.ref().phrase
 
 
+def by_first_word(phrases: Iterable[tuple[str, ...]]) -> dict[str, tuple[tuple[str, ...], ...]]:
+    """Phrases grouped by their first word, each group in the given order, so a word is matched against the few
+    that can start there: a lookup per token, not a scan of every phrase (bounded time on 1,000 characters)."""
+    grouped: dict[str, list[tuple[str, ...]]] = {}
+    for phrase in phrases:
+        grouped.setdefault(phrase[0], []).append(phrase)
+    return {word: tuple(group) for word, group in grouped.items()}
+
+
 @functools.lru_cache(maxsize=64)
-def _object_words(extra: tuple[str, ...]) -> dict[str, list[tuple[str, ...]]]:
-    """Known object words (tuples of tokens) by their first token, longest first: a lookup per token, not a
-    scan of every word (a 1,000-character instruction is read in milliseconds)."""
+def _object_words(extra: tuple[str, ...]) -> dict[str, tuple[tuple[str, ...], ...]]:
+    """Known object words (tuples of tokens) by their first token, longest first."""
     words = {tuple(w.split()) for w in OBJECT_NOUNS} | {tuple(w.split()) for w in extra if w}
-    index: dict[str, list[tuple[str, ...]]] = {}
-    for entry in sorted(words, key=lambda w: -len(w)):
-        index.setdefault(entry[0], []).append(entry)
-    return index
+    return by_first_word(sorted(words, key=lambda w: -len(w)))
 
 
-def _known_at(words: Sequence[str], i: int, known: dict[str, list[tuple[str, ...]]]) -> int:
+def _known_at(words: Sequence[str], i: int, known: dict[str, tuple[tuple[str, ...], ...]]) -> int:
     """Length of the longest known object word starting at words[i] (its last word may be plural), or 0."""
     word = words[i]
     for key in dict.fromkeys((word, singular(word))):
@@ -214,14 +219,6 @@ def _joins_subjects(words: Sequence[str], k: int) -> bool:
     phrase = words[start + 1 : k]
     return len(phrase) >= 2 and phrase[0] in _DETERMINERS and all(
         w.isalpha() and (w in _MODIFIERS or not word_classes(w) or "NOUN" in word_classes(w)) for w in phrase[1:])
-
-
-def by_first_word(phrases: tuple[tuple[str, ...], ...]) -> dict[str, tuple[tuple[str, ...], ...]]:
-    """Phrases grouped by their first word, so a word is matched against the few that can start there."""
-    grouped: dict[str, list[tuple[str, ...]]] = {}
-    for phrase in phrases:
-        grouped.setdefault(phrase[0], []).append(phrase)
-    return {word: tuple(group) for word, group in grouped.items()}
 
 
 _PERMISSIONS_BY_FIRST = by_first_word(_PERMISSIONS)
